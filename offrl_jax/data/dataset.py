@@ -1,0 +1,86 @@
+"""The one in-memory dataset type every reader and generator produces.
+
+Episode boundaries: a row ends its episode when `terminals` (a true terminal: no bootstrapping past it) or `timeouts`
+(a time limit or a cut: the task goes on) is set, or when it is the last row of the dataset.  A row whose successor was
+never recorded (the last step of a time-out without a next observation, e.g. the door demonstrations) gets
+`next_observations = observations` of that row: bootstrapping Q(s_T, pi(s_T)) there is the same "last reward repeated
+forever" assumption as the r_T / (1 - gamma) tail of the returns-to-go.
+"""
+from __future__ import annotations
+
+import dataclasses
+import os
+from pathlib import Path
+
+import numpy as np
+
+ARRAY_FIELDS = ("observations", "actions", "rewards", "next_observations", "terminals", "timeouts")
+NORMALIZE_EPS = 1e-3
+
+
+class DatasetError(ValueError):
+    """A dataset could not be read or failed validation.  The message is one line naming the file and the problem."""
+
+
+@dataclasses.dataclass
+class Dataset:
+    observations: np.ndarray  # (T, obs_dim) float32
+    actions: np.ndarray  # (T, act_dim) float32
+    rewards: np.ndarray  # (T,) float32
+    next_observations: np.ndarray  # (T, obs_dim) float32
+    terminals: np.ndarray  # (T,) float32 in {0, 1}
+    timeouts: np.ndarray  # (T,) float32 in {0, 1}: episode ends that are not terminals
+    env: str | None = None  # short env name from `offrl_jax.envs.ENVS` (e.g. "hopper"), if known
+    name: str = "dataset"  # e.g. "hopper-medium" or the file name
+    source: str = ""  # where it came from (path, "generated", ...)
+
+    def __len__(self) -> int:
+        return int(self.rewards.shape[0])
+
+    @property
+    def obs_dim(self) -> int:
+        return int(self.observations.shape[1])
+
+    @property
+    def act_dim(self) -> int:
+        return int(self.actions.shape[1])
+
+    @property
+    def episode_ends(self) -> np.ndarray:
+        """(T,) bool: the row ends an episode (terminal, time-out or dataset end)."""
+        ends = (self.terminals > 0) | (self.timeouts > 0)
+        ends[-1] = True
+        return ends
+
+    @property
+    def episode_ids(self) -> np.ndarray:
+        """(T,) int32 episode index of every row."""
+        ends = self.episode_ends
+        return np.concatenate([[0], np.cumsum(ends[:-1])]).astype(np.int32)
+
+    def episode_returns(self) -> np.ndarray:
+        """(E,) undiscounted return of every episode."""
+        return np.bincount(self.episode_ids, weights=self.rewards).astype(np.float64)
+
+    def obs_stats(self) -> tuple[np.ndarray, np.ndarray]:
+        """Mean and std (+1e-3) of the observations, for state normalisation (applied identically at evaluation)."""
+        mean = self.observations.mean(0).astype(np.float32)
+        std = (self.observations.std(0) + NORMALIZE_EPS).astype(np.float32)
+        return mean, std
+
+    def select(self, rows: np.ndarray | slice) -> "Dataset":
+        """A sub-dataset of the given rows (keeps metadata)."""
+        arrays = {f: getattr(self, f)[rows] for f in ARRAY_FIELDS}
+        return dataclasses.replace(self, **arrays)
+
+
+def normalize_obs(obs: np.ndarray, mean: np.ndarray, std: np.ndarray) -> np.ndarray:
+    return (obs - mean) / std
+
+
+def cache_dir() -> Path:
+    """Where generated datasets are cached: $OFFRL_JAX_CACHE, else $XDG_CACHE_HOME/offrl_jax, else ~/.cache/offrl_jax."""
+    if os.environ.get("OFFRL_JAX_CACHE"):
+        return Path(os.environ["OFFRL_JAX_CACHE"])
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "offrl_jax"

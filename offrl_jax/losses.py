@@ -1,0 +1,172 @@
+"""Every loss and target as a small pure function of arrays (jit-able, no networks, no hidden state).
+
+Shapes: B = batch, A = action dim, N = ensemble size, M = sampled actions per state.  Q-values of an ensemble are
+(N, B).  Each loss returns a scalar; targets return (B,).  `sg` = `jax.lax.stop_gradient`.
+"""
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+sg = jax.lax.stop_gradient
+
+# --------------------------------------------------------------------------------------------- supervised losses
+
+
+def bc_loss(pred_actions: jax.Array, actions: jax.Array) -> jax.Array:
+    """Behaviour cloning, MSE over every element.  pred_actions, actions: (B, A) -> ()."""
+    return jnp.mean((pred_actions - actions) ** 2)
+
+
+def soft_bc_loss(log_prob_sampled: jax.Array, log_prob_data: jax.Array, alpha: jax.Array) -> jax.Array:
+    """Soft BC (eq. 9): E[alpha log pi(a~|s) - log pi(a|s)].  log probs: (B,), alpha: () -> ().
+
+    `log_prob_data` is log pi of the dataset action (clipped to +-(1-1e-6) before atanh by the caller's
+    `tanh_gaussian_log_prob`); alpha is treated as a constant here (its own loss is `temperature_loss`).
+    """
+    return jnp.mean(sg(alpha) * log_prob_sampled - log_prob_data)
+
+
+def mc_critic_loss(q: jax.Array, returns: jax.Array) -> jax.Array:
+    """Monte-Carlo value error: sum over critics of the batch-mean squared error.  q: (N, B), returns: (B,) -> ()."""
+    return jnp.sum(jnp.mean((q - returns[None]) ** 2, axis=-1))
+
+
+# ----------------------------------------------------------------------------------------------------- TD targets
+
+
+def td_target(reward: jax.Array, terminal: jax.Array, next_value: jax.Array, gamma: float) -> jax.Array:
+    """One-step target r + gamma (1 - terminal) V(s').  (B,) each -> (B,).
+
+    Only true terminals stop bootstrapping: a time-out is not the end of the task, so its successor's value is
+    bootstrapped through (`terminal` must be the terminal flag, not terminal-or-timeout).
+    """
+    return reward + gamma * (1.0 - terminal) * next_value
+
+
+def clipped_double_q(next_q: jax.Array) -> jax.Array:
+    """TD3 / SAC-N pessimism: min over the ensemble.  (N, B) -> (B,)."""
+    return jnp.min(next_q, axis=0)
+
+
+def target_policy_smoothing(key: jax.Array, action: jax.Array, noise: float = 0.2, clip: float = 0.5) -> jax.Array:
+    """TD3's smoothed target action clip(a + clip(noise * eps, -clip, clip), -1, 1).  (B, A) -> (B, A)."""
+    eps = jnp.clip(noise * jax.random.normal(key, action.shape), -clip, clip)
+    return jnp.clip(action + eps, -1.0, 1.0)
+
+
+def soft_value(next_q: jax.Array, next_log_prob: jax.Array, alpha: jax.Array) -> jax.Array:
+    """SAC / EDAC soft value min_i Q_i(s', a') - alpha log pi(a'|s').  next_q (N, B), next_log_prob (B,) -> (B,)."""
+    return clipped_double_q(next_q) - alpha * next_log_prob
+
+
+def mix_targets(mc_return: jax.Array, td: jax.Array, lam: float) -> jax.Array:
+    """Eq. 5 target mixing R~ = (1 - lam) R + lam (r + gamma Q').  (B,), (B,) -> (B,)."""
+    return (1.0 - lam) * mc_return + lam * td
+
+
+def q_transformer_target(mc_return: jax.Array, td: jax.Array) -> jax.Array:
+    """Q-Transformer / Wilcox et al. target max(MC, r + gamma Q') (Appendix F).  (B,), (B,) -> (B,)."""
+    return jnp.maximum(mc_return, td)
+
+
+def critic_regression_loss(q: jax.Array, target: jax.Array) -> jax.Array:
+    """TD (or any target) regression: sum over critics of the batch-mean squared error.  (N, B), (B,) -> ().
+
+    The target is treated as a constant.  Same arithmetic as `mc_critic_loss`; kept separate by name for clarity.
+    """
+    return mc_critic_loss(q, sg(target))
+
+
+# ------------------------------------------------------------------------------------------- loss normalisation
+
+
+def normalized(x: jax.Array, eps: float = 1e-8) -> jax.Array:
+    """x / sg(|x|): value +-1, gradient grad(x)/|x|, never sign-flipped (the authors' sg(x) flips it when x < 0)."""
+    return x / (sg(jnp.abs(x)) + eps)
+
+
+def balance_losses(primary: jax.Array, auxiliary: jax.Array, weight: float) -> jax.Array:
+    """Loss balancing of the hybrids (Appendix G.3): a / sg|a| + c * b / sg|b|.  (), () -> ()."""
+    return normalized(primary) + weight * normalized(auxiliary)
+
+
+def mix_losses(mc_loss: jax.Array, td_loss: jax.Array, lam: float) -> jax.Array:
+    """The authors' lambda mixing on normalised losses: (1-lam) L_MC/sg|L_MC| + lam L_TD/sg|L_TD|.  (), () -> ()."""
+    return (1.0 - lam) * normalized(mc_loss) + lam * normalized(td_loss)
+
+
+# ---------------------------------------------------------------------------------------------------- actor losses
+
+
+def td3bc_actor_loss(q: jax.Array, pred_actions: jax.Array, actions: jax.Array, alpha: float) -> jax.Array:
+    """TD3+BC actor: -lmbda mean Q(s, pi(s)) + MSE(pi(s), a), lmbda = alpha / sg(mean |Q|).
+
+    q: (B,) (the first critic's value of the policy action), pred_actions, actions: (B, A) -> ().
+    """
+    lmbda = alpha / (sg(jnp.mean(jnp.abs(q))) + 1e-8)
+    return -lmbda * jnp.mean(q) + bc_loss(pred_actions, actions)
+
+
+def sac_actor_loss(q: jax.Array, log_prob: jax.Array, alpha: jax.Array) -> jax.Array:
+    """SAC-N / EDAC actor: E[alpha log pi(a~|s) - min_i Q_i(s, a~)].  q: (N, B), log_prob: (B,) -> ()."""
+    return jnp.mean(sg(alpha) * log_prob - clipped_double_q(q))
+
+
+def temperature_loss(log_alpha: jax.Array, log_prob: jax.Array, target_entropy: float) -> jax.Array:
+    """SAC temperature: -E[log_alpha * sg(log pi + H_target)].  log_alpha: (), log_prob: (B,) -> ()."""
+    return -jnp.mean(log_alpha * sg(log_prob + target_entropy))
+
+
+# ---------------------------------------------------------------------------------------------- critic regularisers
+
+
+def edac_diversity_loss(action_grads: jax.Array) -> jax.Array:
+    """EDAC ensemble diversity: mean over the batch of sum_{i != j} <g_i, g_j> / (N - 1), g = normalised dQ_i/da.
+
+    action_grads: (N, B, A), the gradient of each member's Q at the dataset action -> ().  Multiply by eta outside.
+    """
+    n = action_grads.shape[0]
+    g = action_grads / (jnp.linalg.norm(action_grads, axis=-1, keepdims=True) + 1e-10)
+    gram = jnp.einsum("iba,jba->bij", g, g)  # (B, N, N)
+    off_diagonal = jnp.sum(gram, axis=(1, 2)) - jnp.trace(gram, axis1=1, axis2=2)
+    return jnp.mean(off_diagonal) / (n - 1)
+
+
+def cql_uniform_penalty(q_uniform: jax.Array, q_data: jax.Array, temperature: float = 1.0) -> jax.Array:
+    """The simple CQL regulariser of the authors' TD3+BC+CQL.
+
+    sum over critics of mean_b [ T logsumexp_m(Q(s_b, a_u^m) / T) - Q(s_b, a_b) ], a_u ~ U[-1, 1]^A.
+    q_uniform: (N, B, M), q_data: (N, B) -> ().
+    """
+    lse = temperature * jax.nn.logsumexp(q_uniform / temperature, axis=-1)
+    return jnp.sum(jnp.mean(lse - q_data, axis=-1))
+
+
+def cql_importance_penalty(
+    q_random: jax.Array,
+    q_policy: jax.Array,
+    log_prob_policy: jax.Array,
+    q_next_policy: jax.Array,
+    log_prob_next_policy: jax.Array,
+    q_data: jax.Array,
+    act_dim: int,
+    temperature: float = 1.0,
+) -> jax.Array:
+    """CORL's CQL(H) regulariser with importance-sampled logsumexp over random and policy actions.
+
+    q_random (N, B, M) at a ~ U[-1,1]^A (log density A log 0.5); q_policy / q_next_policy (N, B, M) at a ~ pi(.|s)
+    and a ~ pi(.|s') (both evaluated at s); log_prob_* (B, M); q_data (N, B).  Returns the sum over critics of
+    mean_b [T logsumexp(cat(Q_rand - A log 0.5, Q_pi - log pi, Q_pi' - log pi') / T) - Q(s, a_data)] -> ().
+    Multiply by alpha_cql outside.
+    """
+    cat = jnp.concatenate(
+        [
+            q_random - act_dim * jnp.log(0.5),
+            q_policy - sg(log_prob_policy)[None],
+            q_next_policy - sg(log_prob_next_policy)[None],
+        ],
+        axis=-1,
+    )
+    lse = temperature * jax.nn.logsumexp(cat / temperature, axis=-1)
+    return jnp.sum(jnp.mean(lse - q_data, axis=-1))
