@@ -1,0 +1,194 @@
+"""Datasets by name or path, and a small CLI.
+
+    python -m offrl_jax.datasets list                      # known names, and which are cached
+    python -m offrl_jax.datasets info door-human           # one JSON object: transitions, episodes, dims, scores
+    python -m offrl_jax.datasets info path/to/file.hdf5    # any D4RL HDF5, Minari directory/id or Adroit .npz
+    python -m offrl_jax.datasets generate hopper-medium --transitions 100000
+
+Generated names ("hopper-medium", ...) live as Minari-format directories in `cache_dir()/"datasets"/<name>` and are
+generated on first use; "door-human" is the human demonstrations in the shared data folder
+(`$OFFRL_JAX_SHARED`, else `<repo>/../shared`).  Errors exit with status 2 and one line "error: ..." on stderr.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from offrl_jax.data.dataset import Dataset, DatasetError, cache_dir
+from offrl_jax.data.readers import load_dataset_path, minari_root, read_door_npz, read_minari
+from offrl_jax.envs import get_env_spec, normalized_score
+
+_LOCOMOTION_KINDS = {
+    "random": "uniformly random actions",
+    "medium": "a policy at about 1/3 of expert return",
+    "medium-replay": "the replay buffer of training up to the medium policy",
+    "full-replay": "the whole replay buffer of training up to the expert policy",
+    "expert": "the expert policy",
+    "medium-expert": "medium and expert halves concatenated",
+}
+KNOWN: dict[str, str] = {
+    **{f"{env}-{kind}": f"generated: {env}, {text}" for env in ("hopper", "halfcheetah", "walker2d")
+       for kind, text in _LOCOMOTION_KINDS.items()},
+    "door-human": "shared: 25 human demonstrations of Adroit door (6,729 transitions)",
+    "door-cloned": "generated: Adroit door, a behaviour-cloned policy mixed with the human demonstrations",
+}
+SHARED_NAMES = {"door-human": Path("data/adroit/door-human-demos.npz")}
+
+
+def shared_dir() -> Path:
+    """The shared data folder: $OFFRL_JAX_SHARED, else `shared/` beside the repository root (found from this file,
+    or from the working directory when the package is installed elsewhere)."""
+    if os.environ.get("OFFRL_JAX_SHARED"):
+        return Path(os.environ["OFFRL_JAX_SHARED"])
+    beside_repo = Path(__file__).resolve().parents[1].parent / "shared"
+    beside_cwd = Path.cwd().resolve().parent / "shared"
+    return beside_repo if beside_repo.is_dir() or not beside_cwd.is_dir() else beside_cwd
+
+
+def door_human_path() -> Path:
+    return shared_dir() / SHARED_NAMES["door-human"]
+
+
+def cached_path(name: str) -> Path:
+    """Where a generated dataset is cached (a Minari dataset directory)."""
+    return cache_dir() / "datasets" / name
+
+
+def is_cached(name: str) -> bool:
+    path = cached_path(name)
+    return (path / "data" / "metadata.json").is_file() or (path / "metadata.json").is_file()
+
+
+def _unknown(name_or_path) -> DatasetError:
+    return DatasetError(f"{name_or_path}: unknown dataset name and no such file; known names: {', '.join(KNOWN)}")
+
+
+def generate(name: str, *, transitions: int | None = None, out_dir=None, seed: int = 0) -> Path:
+    """Generate a known dataset with `offrl_jax.data.generate` and return its Minari directory."""
+    if name not in KNOWN or name in SHARED_NAMES:
+        generated = [n for n in KNOWN if n not in SHARED_NAMES]
+        raise DatasetError(f"{name}: not a generated dataset; generated names: {', '.join(generated)}")
+    try:
+        from offrl_jax.data.generate import generate as _generate
+    except ImportError as e:
+        raise DatasetError(f"{name}: the dataset generator is not available ({e})") from None
+    return Path(_generate(name, transitions=transitions, out_dir=out_dir, seed=seed))
+
+
+def _load_generated(name: str, transitions, clip_actions, generate_if_missing: bool) -> Dataset:
+    path = cached_path(name)
+    if not is_cached(name):
+        if not generate_if_missing:
+            raise DatasetError(f"{path}: '{name}' is not generated yet; run: python -m offrl_jax.datasets generate "
+                               f"{name}")
+        path = generate(name, transitions=transitions)
+    kw = {} if clip_actions is None else {"clip_actions": clip_actions}
+    ds = read_minari(path, env=get_env_spec(name).name, **kw)
+    if transitions is not None and len(ds) != transitions:
+        warnings.warn(f"{path}: cached '{name}' has {len(ds)} transitions, not the {transitions} asked for; "
+                      "delete the directory to generate it again", stacklevel=3)
+    return dataclasses.replace(ds, name=name)
+
+
+def load(name_or_path, *, transitions: int | None = None, clip_actions: bool | None = None,
+         generate_if_missing: bool = True) -> Dataset:
+    """A validated `Dataset` from a known name (see `KNOWN`) or a path / Minari id (see `load_dataset_path`).
+
+    transitions: size to generate when a generated name is not cached yet (None: the generator's default).
+    clip_actions: clip out-of-range actions with a warning instead of failing; None: the reader's default (True
+      for the door human demonstrations, whose out-of-range values the env clips anyway; False otherwise).
+    """
+    name = str(name_or_path)
+    if name in SHARED_NAMES:
+        kw = {} if clip_actions is None else {"clip_actions": clip_actions}
+        return dataclasses.replace(read_door_npz(door_human_path(), **kw), name=name)
+    if name in KNOWN:
+        return _load_generated(name, transitions, clip_actions, generate_if_missing)
+    looks_like_path = (Path(name).exists() or Path(name).suffix.lower() in (".hdf5", ".h5", ".npz") or "/" in name
+                       or (minari_root() / name).is_dir())
+    if not looks_like_path:
+        raise _unknown(name)
+    return load_dataset_path(name, clip_actions=clip_actions)
+
+
+def summary(ds: Dataset) -> dict:
+    """Size, dims and mean episode return (normalised when the env is known) of a dataset, JSON-ready."""
+    returns = ds.episode_returns()
+    mean_return = float(returns.mean())
+    return {
+        "name": ds.name,
+        "env": ds.env,
+        "source": ds.source,
+        "transitions": len(ds),
+        "episodes": int(len(returns)),
+        "obs_dim": ds.obs_dim,
+        "act_dim": ds.act_dim,
+        "terminals": int(ds.terminals.sum()),
+        "timeouts": int(ds.timeouts.sum()),
+        "mean_episode_return": mean_return,
+        "normalized_score": float(normalized_score(ds.env, mean_return)) if ds.env else None,
+    }
+
+
+# ------------------------------------------------------------------------------------------------------------ CLI
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # one line, like every other error of this CLI
+        print(f"error: {message}", file=sys.stderr)
+        sys.exit(2)
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="python -m offrl_jax.datasets", description="Offline RL datasets: list, inspect, generate.")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    sub.add_parser("list", help="known dataset names and which are cached")
+    info = sub.add_parser("info", help="one JSON line describing a dataset (name, file, directory or Minari id)")
+    info.add_argument("dataset")
+    info.add_argument("--clip-actions", action="store_true", default=None, help="clip actions outside [-1, 1]")
+    gen = sub.add_parser("generate", help="generate a known dataset into the cache (or --out)")
+    gen.add_argument("name")
+    gen.add_argument("--transitions", type=int, default=None)
+    gen.add_argument("--out", type=Path, default=None)
+    gen.add_argument("--seed", type=int, default=0)
+    return parser
+
+
+def _list() -> None:
+    for name, text in KNOWN.items():
+        if name in SHARED_NAMES:
+            where = door_human_path()
+            state = f"shared  {where}" if where.is_file() else f"missing {where}"
+        else:
+            state = f"cached  {cached_path(name)}" if is_cached(name) else "not cached"
+        print(f"{name:26s} {state:60s} {text}")
+
+
+def _one_line_warning(message, category, filename, lineno, file=None, line=None):
+    print(f"warning: {message}", file=sys.stderr)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    warnings.showwarning = _one_line_warning
+    try:
+        if args.command == "list":
+            _list()
+        elif args.command == "info":
+            ds = load(args.dataset, clip_actions=args.clip_actions, generate_if_missing=False)
+            print(json.dumps(summary(ds)))
+        else:
+            print(generate(args.name, transitions=args.transitions, out_dir=args.out, seed=args.seed))
+    except (DatasetError, ValueError, FileNotFoundError) as e:
+        print(f"error: {' '.join(str(e).split())}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
