@@ -1,0 +1,228 @@
+"""Generate D4RL-style MuJoCo datasets on gymnasium v5 (the D4RL recipe), written in Minari's format.
+
+    from offrl_jax.data.generate import generate
+    path = generate("hopper-medium")                 # -> cache_dir()/"datasets"/"hopper-medium"
+    path = generate("hopper-medium", transitions=2000, out_dir="/tmp/hm")
+
+Levels (D4RL's definitions, our SAC behaviour policies; see docs/datasets.md):
+    random          uniform random actions in [-1, 1], 1M transitions
+    medium          the shipped medium SAC actor (eval score ~1/3 of expert), stochastic actions, 1M
+    expert          the shipped expert SAC actor, stochastic actions, 1M
+    medium-expert   medium ++ expert (same seeds, so it is the two datasets concatenated), 2M
+    medium-replay   every transition the SAC run saw up to the medium checkpoint's step
+    full-replay     every transition the SAC run saw up to the expert checkpoint's step
+
+The replay levels read the SAC run directory `cache_dir()/"sac"/<env>-seed<sac_seed>` (the run that produced the
+shipped checkpoints, if present); if it is missing it is trained there first (progress bar), up to the needed step.
+
+On disk: `out_dir/data/{main_data.hdf5, metadata.json}` written by `minari.create_dataset_from_buffers` (dataset id
+`<name>-v0`), plus `out_dir/offrl_jax.json` (env, policy checkpoint, seeds, D4RL reference scores, statistics).  Load
+with `minari.load_dataset(out_dir.name)` under `MINARI_DATASETS_PATH=out_dir.parent`, or `MinariDataset(out_dir/"data")`.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from offrl_jax.data.dataset import Dataset, cache_dir
+from offrl_jax.data.generate.collect import (
+    MEDIUM_TARGET_SCORE,
+    POLICY_DIR,
+    collect,
+    load_policy,
+    shipped_policies,
+    summarize,
+)
+from offrl_jax.envs import get_env_spec
+
+GEN_ENVS = ("hopper", "halfcheetah", "walker2d")
+LEVELS = ("random", "medium", "expert", "medium-expert", "medium-replay", "full-replay")
+DATASET_NAMES = tuple(f"{e}-{lvl}" for e in GEN_ENVS for lvl in LEVELS)
+DEFAULT_TRANSITIONS = 1_000_000
+
+# D4RL v2 statistics for comparison (transitions, episodes, mean normalised behaviour score); None = not tabulated.
+D4RL_V2_STATS: dict[str, dict[str, float | None]] = {
+    "hopper-medium": {"transitions": 1_000_000, "episodes": 2186, "normalized_score": 44.0},
+    "halfcheetah-medium": {"transitions": 1_000_000, "episodes": 1000, "normalized_score": 40.0},
+    "walker2d-medium": {"transitions": 1_000_000, "episodes": 1191, "normalized_score": 62.0},
+}
+
+
+def parse_name(name: str) -> tuple[str, str]:
+    """"hopper-medium-replay" -> ("hopper", "medium-replay"); raises ValueError for unknown names."""
+    env, _, level = name.partition("-")
+    if env not in GEN_ENVS or level not in LEVELS:
+        raise ValueError(f"unknown dataset '{name}'; valid: {', '.join(DATASET_NAMES)}")
+    return env, level
+
+
+def default_dir(name: str) -> Path:
+    """Where `generate(name)` writes by default: cache_dir()/"datasets"/<name>."""
+    return cache_dir() / "datasets" / name
+
+
+def sac_run_dir(env: str, sac_seed: int = 0) -> Path:
+    """The cached SAC training run of an env (its checkpoints and every transition it saw)."""
+    return cache_dir() / "sac" / f"{env}-seed{sac_seed}"
+
+
+def _policy(env: str, level: str) -> tuple[Any, dict[str, Any]]:
+    name = f"{env}-{level}"
+    if name not in shipped_policies():
+        raise FileNotFoundError(
+            f"no shipped '{name}' policy in {POLICY_DIR}; train one with `python -m offrl_jax.data.generate.sac "
+            f"--env {env} --out {sac_run_dir(env)}` and ship a checkpoint (see docs/datasets.md)"
+        )
+    params, meta = load_policy(name)
+    meta["sha256"] = hashlib.sha256(Path(meta["path"]).read_bytes()).hexdigest()
+    return params, meta
+
+
+def _replay(env: str, level: str, n: int | None, progress: bool, run_dir: Path | None) -> tuple[Dataset, dict]:
+    from offrl_jax.data.generate import sac
+
+    policy_level = "medium" if level == "medium-replay" else "expert"
+    meta = shipped_policies().get(f"{env}-{policy_level}")
+    if meta is None:
+        raise FileNotFoundError(f"{env}-{level} needs the shipped {env}-{policy_level} checkpoint to know where to stop")
+    step, sac_seed = int(meta["sac_step"]), int(meta.get("sac_seed", 0))
+    run_dir = Path(run_dir) if run_dir is not None else sac_run_dir(env, sac_seed)
+    if not (run_dir / "run.json").exists():
+        print(f"[generate] no SAC run in {run_dir}: training {env} for {step} steps (seed {sac_seed})")
+        sac.train(env, step, run_dir, seed=sac_seed, progress=progress)
+    data = sac.load_replay(run_dir, upto=step)
+    if n is not None:
+        data = {k: v[:n] for k, v in data.items()}
+    if data["terminals"][-1] == 0:
+        data["timeouts"][-1] = 1.0  # the run goes on past the cut
+    source = {"sac_run": str(run_dir), "upto_step": step, "policy_checkpoint": meta["file"]}
+    return Dataset(**data, env=env, name=f"{env}-{level}", source="generated"), source
+
+
+def build(name: str, transitions: int | None = None, seed: int = 0, progress: bool = True, num_envs: int = 16,
+          sac_run: str | Path | None = None) -> tuple[Dataset, dict[str, Any]]:
+    """The in-memory dataset `name` and the provenance of its data (no writing)."""
+    env, level = parse_name(name)
+    n = transitions or DEFAULT_TRANSITIONS
+    kw = {"num_envs": num_envs, "progress": progress}
+    if level == "random":
+        return collect(env, "random", n, seed, name=name, **kw), {"policy": "uniform random"}
+    if level in ("medium", "expert"):
+        params, meta = _policy(env, level)
+        ds = collect(env, params, n, seed, stochastic=True, hidden=tuple(meta["hidden"]), name=name, **kw)
+        return ds, {"policy": {k: meta[k] for k in meta if k != "path"}, "stochastic": True}
+    if level == "medium-expert":
+        half = None if transitions is None else transitions // 2
+        med, src_m = build(f"{env}-medium", half, seed, progress, num_envs)
+        exp, src_e = build(f"{env}-expert", None if transitions is None else transitions - half, seed, progress,
+                           num_envs)
+        arrays = {f: np.concatenate([getattr(med, f), getattr(exp, f)]) for f in
+                  ("observations", "actions", "rewards", "next_observations", "terminals", "timeouts")}
+        arrays["timeouts"][len(med) - 1] = max(arrays["timeouts"][len(med) - 1], 1 - arrays["terminals"][len(med) - 1])
+        return Dataset(**arrays, env=env, name=name, source="generated"), {"medium": src_m, "expert": src_e}
+    return _replay(env, level, transitions, progress, None if sac_run is None else Path(sac_run))
+
+
+def write_minari(ds: Dataset, out_dir: Path, info: dict[str, Any], overwrite: bool = False) -> Path:
+    """Write `ds` with `minari.create_dataset_from_buffers` into exactly `out_dir` (dataset id `<name>-v0`).
+
+    Minari writes to $MINARI_DATASETS_PATH/<dataset_id>; we point that at a scratch folder next to `out_dir` and
+    rename the result to `out_dir`, so any directory name works.
+    """
+    import gymnasium as gym
+    import minari
+    from minari.data_collector.episode_buffer import EpisodeBuffer
+
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not overwrite:
+        raise FileExistsError(f"{out_dir} exists; pass overwrite=True to replace it")
+    spec = get_env_spec(ds.env or ds.name)
+    ends = np.flatnonzero(ds.episode_ends) + 1
+    starts = np.concatenate([[0], ends[:-1]])
+    buffers = []
+    for i, (s, e) in enumerate(zip(starts, ends)):
+        obs, nxt = ds.observations[s:e], ds.next_observations[s:e]
+        if not np.array_equal(obs[1:], nxt[:-1]):
+            raise ValueError(f"{ds.name}: episode {i} is not contiguous (next_observations[t] != observations[t+1])")
+        term = ds.terminals[s:e] > 0
+        trunc = (ds.timeouts[s:e] > 0) & ~term
+        trunc[-1] = not term[-1]
+        buffers.append(EpisodeBuffer(id=i, observations=np.concatenate([obs, nxt[-1:]]), actions=ds.actions[s:e],
+                                     rewards=ds.rewards[s:e].astype(np.float64), terminations=term,
+                                     truncations=trunc))
+    obs_space = gym.spaces.Box(-np.inf, np.inf, (ds.obs_dim,), np.float32)
+    act_space = gym.spaces.Box(-1.0, 1.0, (ds.act_dim,), np.float32)
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    scratch = out_dir.parent / f".minari-tmp-{out_dir.name}-{os.getpid()}"
+    shutil.rmtree(scratch, ignore_errors=True)
+    old = os.environ.get("MINARI_DATASETS_PATH")
+    os.environ["MINARI_DATASETS_PATH"] = str(scratch)
+    try:
+        import warnings
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            dataset = minari.create_dataset_from_buffers(
+                f"{ds.name}-v0", buffers, env=gym.spec(spec.gym_id), algorithm_name=info.get("algorithm", "SAC"),
+                author="offrl_jax", author_email="offrl_jax@users.noreply.github.com",
+                code_permalink="offrl_jax/data/generate", action_space=act_space, observation_space=obs_space,
+                ref_min_score=spec.ref_min_score, ref_max_score=spec.ref_max_score,
+                description=f"{ds.name}: D4RL-recipe dataset generated by offrl_jax on {spec.gym_id}",
+            )
+            dataset.storage.update_metadata({"offrl_jax": json.dumps(info)})
+        if out_dir.exists():
+            shutil.rmtree(out_dir)
+        (scratch / f"{ds.name}-v0").rename(out_dir)
+    finally:
+        if old is None:
+            os.environ.pop("MINARI_DATASETS_PATH", None)
+        else:
+            os.environ["MINARI_DATASETS_PATH"] = old
+        shutil.rmtree(scratch, ignore_errors=True)
+    (out_dir / "offrl_jax.json").write_text(json.dumps(info, indent=1))
+    return out_dir
+
+
+def generate(name: str, transitions: int | None = None, out_dir: str | Path | None = None, seed: int = 0,
+             overwrite: bool = False, progress: bool = True, num_envs: int = 16,
+             sac_run: str | Path | None = None) -> Path:
+    """Generate dataset `name` (e.g. "hopper-medium") and write it with minari; returns its directory.
+
+    transitions: cap on the number of rows (default 1M per policy; the replay levels default to the whole run).
+    out_dir: the dataset directory (default `cache_dir()/"datasets"/name`); an existing one raises unless overwrite.
+    seed: env / action-noise seed of the rollouts.  sac_run: SAC run directory for the replay levels.
+    """
+    env, level = parse_name(name)
+    out = Path(out_dir) if out_dir is not None else default_dir(name)
+    if out.exists() and not overwrite:
+        raise FileExistsError(f"{out} exists; pass overwrite=True to replace it")
+    t0 = time.time()
+    ds, source = build(name, transitions, seed, progress, num_envs, sac_run)
+    t_collect = time.time() - t0
+    spec = get_env_spec(env)
+    info = {
+        "name": name, "env": env, "gym_id": spec.gym_id, "level": level, "seed": seed,
+        "transitions_cap": transitions, "source": source,
+        "ref_min_score": spec.ref_min_score, "ref_max_score": spec.ref_max_score,
+        "stats": summarize(ds), "d4rl_v2": D4RL_V2_STATS.get(name), "collect_s": round(t_collect, 1),
+    }
+    write_minari(ds, out, info, overwrite=overwrite)
+    info["total_s"] = round(time.time() - t0, 1)
+    (out / "offrl_jax.json").write_text(json.dumps(info, indent=1))
+    if progress:
+        st = info["stats"]
+        print(f"[generate] {name}: {st['transitions']} transitions, {st['episodes']} episodes, "
+              f"return {st['return_mean']:.0f} (norm {st['normalized_score']:.1f}) in {info['total_s']:.0f}s -> {out}")
+    return out
+
+
+__all__ = ["generate", "build", "write_minari", "collect", "load_policy", "shipped_policies", "parse_name",
+           "default_dir", "sac_run_dir", "DATASET_NAMES", "LEVELS", "GEN_ENVS", "D4RL_V2_STATS",
+           "MEDIUM_TARGET_SCORE"]

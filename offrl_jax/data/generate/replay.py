@@ -1,0 +1,64 @@
+"""The replay of a SAC run: every transition it saw, in order (the medium-replay / full-replay levels).
+
+In memory a `ReplayBuffer` with capacity = the run's total steps (nothing is overwritten); on disk one
+`replay/<start>_<end>.npz` per evaluation period of the run directory, with the `Dataset` array fields.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+
+class ReplayBuffer:
+    """Numpy replay of every transition seen (capacity = total steps, nothing is ever overwritten)."""
+
+    def __init__(self, obs_dim: int, act_dim: int, capacity: int):
+        self.data = {
+            "observations": np.zeros((capacity, obs_dim), np.float32),
+            "actions": np.zeros((capacity, act_dim), np.float32),
+            "rewards": np.zeros(capacity, np.float32),
+            "next_observations": np.zeros((capacity, obs_dim), np.float32),
+            "terminals": np.zeros(capacity, np.float32),
+            "timeouts": np.zeros(capacity, np.float32),
+        }
+        self.size = 0
+
+    def add(self, obs, action, reward, next_obs, terminal: bool, timeout: bool) -> None:
+        i = self.size
+        d = self.data
+        d["observations"][i] = obs
+        d["actions"][i] = action
+        d["rewards"][i] = reward
+        d["next_observations"][i] = next_obs
+        d["terminals"][i] = terminal
+        d["timeouts"][i] = timeout
+        self.size += 1
+
+    def sample(self, rng: np.random.Generator, batch_size: int) -> dict[str, np.ndarray]:
+        idx = rng.integers(0, self.size, batch_size)
+        return {k: v[idx] for k, v in self.data.items()}
+
+    def save_range(self, path: Path, start: int, end: int) -> None:
+        np.savez(path, **{k: v[start:end] for k, v in self.data.items()})
+
+
+def load_replay(run_dir: str | Path, upto: int | None = None) -> dict[str, np.ndarray]:
+    """Every transition of a run, in order, up to env step `upto` (all if None).  Dataset field arrays."""
+    files = sorted((Path(run_dir) / "replay").glob("*.npz"))
+    if not files:
+        raise FileNotFoundError(f"no replay chunks in {run_dir}/replay")
+    parts: dict[str, list[np.ndarray]] = {}
+    for f in files:
+        start = int(f.stem.split("_")[0])
+        if upto is not None and start >= upto:
+            break
+        with np.load(f) as z:
+            for k in z.files:
+                parts.setdefault(k, []).append(z[k])
+    data = {k: np.concatenate(v) for k, v in parts.items()}
+    if upto is not None:
+        if len(data["rewards"]) < upto:
+            raise ValueError(f"{run_dir} holds {len(data['rewards'])} transitions, fewer than the {upto} asked for")
+        data = {k: v[:upto] for k, v in data.items()}
+    return data

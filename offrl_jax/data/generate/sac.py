@@ -1,0 +1,292 @@
+"""Online SAC in JAX, the behaviour-policy trainer of the generated D4RL-style datasets.
+
+One jitted update per env step (critic, actor and temperature in one call, fused with choosing the next action),
+actor 256-256 tanh-Gaussian and twin critics 256-256 (`CriticEnsemble(num=2)`), no LayerNorm, auto temperature with
+target entropy -act_dim, Adam 3e-4, batch 256, gamma 0.99, tau 0.005, uniform-random warm-up.  Bootstraps through
+time-outs (only true terminals stop the target).  Losses come from `offrl_jax.losses`.
+
+A run directory holds
+    log.jsonl                     one line per evaluation (step, returns, normalised score, steps/s, losses, ...)
+    checkpoints/actor_<step>.msgpack   actor variables after `step` env steps (flax msgpack, ~300 KB)
+    replay/<start>_<end>.npz      every transition seen, in order, one file per evaluation period
+    run.json                      config, env, seed, final step, why it stopped
+
+CLI:  python -m offrl_jax.data.generate.sac --env hopper --steps 1000000 --out DIR [--stop-score 100]
+Stops early at --stop-score (normalised eval score), on SIGINT / SIGTERM, or when DIR/STOP appears; the transitions
+seen so far are always written.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import functools
+import json
+import signal
+import time
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import flax.serialization
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+
+from offrl_jax import losses
+from offrl_jax.data.generate.collect import ACTOR_HIDDEN, actor_module, evaluate, make_gen_env
+from offrl_jax.data.generate.replay import ReplayBuffer, load_replay  # noqa: F401  (load_replay re-exported)
+from offrl_jax.envs import get_env_spec, normalized_score
+from offrl_jax.nets import CriticEnsemble, sample_tanh_gaussian
+
+
+@dataclasses.dataclass(frozen=True)
+class SACConfig:
+    hidden: tuple[int, ...] = ACTOR_HIDDEN
+    lr: float = 3e-4
+    batch_size: int = 256
+    gamma: float = 0.99
+    tau: float = 0.005
+    warmup_steps: int = 5_000
+    init_log_alpha: float = 0.0
+
+
+class SACState(NamedTuple):
+    actor: Any
+    critic: Any
+    target_critic: Any
+    log_alpha: jax.Array
+    actor_opt: Any
+    critic_opt: Any
+    alpha_opt: Any
+    key: jax.Array
+
+
+class SAC:
+    """Modules, init and the jitted fused step of SAC for one (obs_dim, act_dim)."""
+
+    def __init__(self, obs_dim: int, act_dim: int, cfg: SACConfig = SACConfig()):
+        self.obs_dim, self.act_dim, self.cfg = obs_dim, act_dim, cfg
+        self.actor = actor_module(act_dim, cfg.hidden)
+        self.critic = CriticEnsemble(num=2, hidden=cfg.hidden, layer_norm=False)
+        self.opt = optax.adam(cfg.lr)
+        self.target_entropy = -float(act_dim)
+        self.update = jax.jit(self._update)
+        self.update_and_act = jax.jit(self._update_and_act)
+
+    def init(self, seed: int) -> SACState:
+        return jax.jit(self._init)(jax.random.PRNGKey(seed))
+
+    def _init(self, key: jax.Array) -> SACState:
+        key, k_actor, k_critic = jax.random.split(key, 3)
+        obs = jnp.zeros((1, self.obs_dim))
+        act = jnp.zeros((1, self.act_dim))
+        actor = self.actor.init(k_actor, obs)
+        critic = self.critic.init(k_critic, obs, act)
+        log_alpha = jnp.asarray(self.cfg.init_log_alpha, jnp.float32)
+        return SACState(
+            actor, critic, critic, log_alpha, self.opt.init(actor), self.opt.init(critic), self.opt.init(log_alpha), key
+        )
+
+    def _update(self, state: SACState, batch: dict[str, jax.Array]) -> tuple[SACState, dict[str, jax.Array]]:
+        cfg = self.cfg
+        key, k_next, k_pi = jax.random.split(state.key, 3)
+        alpha = jnp.exp(state.log_alpha)
+
+        # critic: r + gamma (1 - terminal) (min_i Q'_i(s', a') - alpha log pi(a'|s')), a' ~ pi(s')
+        mean, log_std = self.actor.apply(state.actor, batch["next_observations"])
+        next_act, next_logp = sample_tanh_gaussian(k_next, mean, log_std)
+        next_q = self.critic.apply(state.target_critic, batch["next_observations"], next_act)
+        next_v = losses.soft_value(next_q, next_logp, alpha)
+        target = losses.td_target(batch["rewards"], batch["terminals"], next_v, cfg.gamma)
+
+        def critic_loss_fn(params):
+            q = self.critic.apply(params, batch["observations"], batch["actions"])
+            return losses.critic_regression_loss(q, target), q
+
+        (critic_loss, q), grads = jax.value_and_grad(critic_loss_fn, has_aux=True)(state.critic)
+        updates, critic_opt = self.opt.update(grads, state.critic_opt, state.critic)
+        critic = optax.apply_updates(state.critic, updates)
+
+        # actor: E[alpha log pi(a~|s) - min_i Q_i(s, a~)] with the updated critic
+        def actor_loss_fn(params):
+            mean, log_std = self.actor.apply(params, batch["observations"])
+            act, logp = sample_tanh_gaussian(k_pi, mean, log_std)
+            q_pi = self.critic.apply(critic, batch["observations"], act)
+            return losses.sac_actor_loss(q_pi, logp, alpha), logp
+
+        (actor_loss, logp), grads = jax.value_and_grad(actor_loss_fn, has_aux=True)(state.actor)
+        updates, actor_opt = self.opt.update(grads, state.actor_opt, state.actor)
+        actor = optax.apply_updates(state.actor, updates)
+
+        # temperature: -E[log_alpha (log pi + H_target)]
+        alpha_loss, grad = jax.value_and_grad(losses.temperature_loss)(state.log_alpha, logp, self.target_entropy)
+        updates, alpha_opt = self.opt.update(grad, state.alpha_opt, state.log_alpha)
+        log_alpha = optax.apply_updates(state.log_alpha, updates)
+
+        target_critic = optax.incremental_update(critic, state.target_critic, cfg.tau)
+        new = SACState(actor, critic, target_critic, log_alpha, actor_opt, critic_opt, alpha_opt, key)
+        info = {
+            "critic_loss": critic_loss,
+            "actor_loss": actor_loss,
+            "alpha": alpha,
+            "alpha_loss": alpha_loss,
+            "q_mean": jnp.mean(q),
+            "entropy": -jnp.mean(logp),
+        }
+        return new, info
+
+    def _update_and_act(self, state: SACState, batch: dict[str, jax.Array], obs: jax.Array):
+        """One update, then a stochastic action of the updated actor for `obs` (obs_dim,) -> (act_dim,)."""
+        state, info = self._update(state, batch)
+        key, k_act = jax.random.split(state.key)
+        mean, log_std = self.actor.apply(state.actor, obs)
+        action, _ = sample_tanh_gaussian(k_act, mean, log_std)
+        return state._replace(key=key), info, action
+
+
+@functools.lru_cache(maxsize=8)
+def make_sac(obs_dim: int, act_dim: int, cfg: SACConfig = SACConfig()) -> SAC:
+    """A shared `SAC` per (dims, config), so its jitted functions compile once per process."""
+    return SAC(obs_dim, act_dim, cfg)
+
+
+def train(
+    env_name: str,
+    steps: int,
+    out_dir: str | Path,
+    seed: int = 0,
+    cfg: SACConfig = SACConfig(),
+    eval_every: int = 10_000,
+    eval_episodes: int = 5,
+    stop_score: float | None = None,
+    progress: bool = True,
+    max_episode_steps: int | None = None,
+) -> dict[str, Any]:
+    """Train SAC for `steps` env steps (or until a stop), writing the run directory described in the module doc.
+
+    Returns run.json's content: {"env", "seed", "steps_done", "stopped", "checkpoints": [{"step", "return", ...}]}.
+    """
+    spec = get_env_spec(env_name)
+    out = Path(out_dir)
+    (out / "checkpoints").mkdir(parents=True, exist_ok=True)
+    (out / "replay").mkdir(exist_ok=True)
+    if (out / "log.jsonl").exists() and (out / "log.jsonl").stat().st_size > 0:
+        raise FileExistsError(f"{out} already holds a SAC run (log.jsonl); use a new --out")
+    (out / "STOP").unlink(missing_ok=True)
+    run = {"env": spec.name, "gym_id": spec.gym_id, "seed": seed, "steps": steps, "config": dataclasses.asdict(cfg),
+           "eval_every": eval_every, "eval_episodes": eval_episodes, "obs_dim": spec.obs_dim,
+           "act_dim": spec.act_dim, "steps_done": 0, "stopped": "running", "checkpoints": []}
+    (out / "run.json").write_text(json.dumps(run, indent=1))
+
+    env = make_gen_env(spec.name, max_episode_steps)
+    obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
+    sac = make_sac(obs_dim, act_dim, cfg)
+    state = sac.init(seed)
+    buffer = ReplayBuffer(obs_dim, act_dim, steps)
+    rng = np.random.default_rng(seed)
+
+    stop_reason = {"why": None}
+
+    def _on_signal(signum, _frame):
+        stop_reason["why"] = signal.Signals(signum).name
+
+    old_handlers = {s: signal.signal(s, _on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=steps, desc=f"SAC {spec.name}", unit="step", mininterval=2.0, smoothing=0.02)
+    obs, _ = env.reset(seed=seed)
+    obs = obs.astype(np.float32)
+    action = None
+    ep_return, ep_len, last_train_return, last_eval = 0.0, 0, float("nan"), float("nan")
+    saved_upto, info, t0, t_period, step = 0, {}, time.time(), time.time(), 0
+    log = (out / "log.jsonl").open("a")
+    try:
+        for step in range(1, steps + 1):
+            if action is None:
+                action = rng.uniform(-1.0, 1.0, act_dim).astype(np.float32)
+            next_obs, reward, terminated, truncated, _ = env.step(action)
+            next_obs = next_obs.astype(np.float32)
+            buffer.add(obs, action, reward, next_obs, terminated, truncated and not terminated)
+            ep_return += reward
+            ep_len += 1
+            if terminated or truncated:
+                last_train_return, ep_return, ep_len = ep_return, 0.0, 0
+                next_obs, _ = env.reset()
+                next_obs = next_obs.astype(np.float32)
+            obs = next_obs
+            action = None
+            if step >= cfg.warmup_steps:
+                state, info, act = sac.update_and_act(state, buffer.sample(rng, cfg.batch_size), obs)
+                action = np.asarray(act)
+            if bar is not None:
+                bar.update(1)
+            if step % eval_every == 0 or step == steps or stop_reason["why"] or (out / "STOP").exists():
+                returns = evaluate(spec.name, state.actor, eval_episodes, seed=seed + step, hidden=cfg.hidden,
+                                   max_episode_steps=max_episode_steps)
+                last_eval = float(returns.mean())
+                score = float(normalized_score(spec.name, last_eval))
+                ckpt = out / "checkpoints" / f"actor_{step:07d}.msgpack"
+                ckpt.write_bytes(flax.serialization.to_bytes(state.actor))
+                buffer.save_range(out / "replay" / f"{saved_upto:07d}_{step:07d}.npz", saved_upto, step)
+                saved_upto = step
+                now = time.time()
+                entry = {"step": step, "eval_return": last_eval, "eval_returns": returns.round(1).tolist(),
+                         "normalized_score": round(score, 2), "train_return": last_train_return,
+                         "steps_per_s": round(eval_every / max(now - t_period, 1e-9), 1) if step % eval_every == 0
+                         else None, "wall_s": round(now - t0, 1),
+                         **{k: float(v) for k, v in info.items()}, "checkpoint": str(ckpt.relative_to(out))}
+                t_period = now
+                log.write(json.dumps(entry) + "\n")
+                log.flush()
+                run["checkpoints"].append({"step": step, "eval_return": last_eval, "normalized_score": score,
+                                           "file": entry["checkpoint"]})
+                run["steps_done"] = step
+                (out / "run.json").write_text(json.dumps(run, indent=1))
+                msg = f"step {step}: eval {last_eval:.0f} (norm {score:.1f}), train ep {last_train_return:.0f}"
+                (bar.write if bar is not None else print)(msg)
+                if bar is not None:
+                    bar.set_postfix(eval=f"{last_eval:.0f}", norm=f"{score:.0f}")
+                if stop_score is not None and score >= stop_score:
+                    stop_reason["why"] = f"stop_score {stop_score} reached"
+                if (out / "STOP").exists():
+                    stop_reason["why"] = "STOP file"
+            if stop_reason["why"]:
+                break
+    finally:
+        if saved_upto < buffer.size:  # an exception: keep what was seen
+            buffer.save_range(out / "replay" / f"{saved_upto:07d}_{buffer.size:07d}.npz", saved_upto, buffer.size)
+        log.close()
+        if bar is not None:
+            bar.close()
+        for s, h in old_handlers.items():
+            signal.signal(s, h)
+        env.close()
+        run["steps_done"] = buffer.size
+        run["stopped"] = stop_reason["why"] or ("finished" if buffer.size == steps else "error")
+        run["wall_s"] = round(time.time() - t0, 1)
+        (out / "run.json").write_text(json.dumps(run, indent=1))
+    return run
+
+
+def main(argv: list[str] | None = None) -> None:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--env", required=True, help="hopper | halfcheetah | walker2d")
+    p.add_argument("--steps", type=int, default=1_000_000)
+    p.add_argument("--out", required=True, help="run directory (must not hold a run already)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--eval-every", type=int, default=10_000)
+    p.add_argument("--eval-episodes", type=int, default=5)
+    p.add_argument("--warmup", type=int, default=SACConfig.warmup_steps)
+    p.add_argument("--stop-score", type=float, default=None, help="stop once the normalised eval score reaches this")
+    p.add_argument("--no-progress", action="store_true")
+    a = p.parse_args(argv)
+    cfg = SACConfig(warmup_steps=a.warmup)
+    run = train(a.env, a.steps, a.out, a.seed, cfg, a.eval_every, a.eval_episodes, a.stop_score, not a.no_progress)
+    best = max(run["checkpoints"], key=lambda c: c["eval_return"], default=None)
+    print(json.dumps({"steps_done": run["steps_done"], "stopped": run["stopped"], "best": best}))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,103 @@
+"""Choosing a behaviour policy from a SAC run and shipping it in `offrl_jax/data/policies/`.
+
+    python -m offrl_jax.data.generate.ship --run ~/.cache/offrl_jax/sac/hopper-seed0 --level medium [--step N]
+
+medium: the checkpoint whose (5-episode, deterministic) eval normalised score during training is closest to D4RL's
+medium behaviour score (`MEDIUM_TARGET_SCORE`); expert: the checkpoint with the best eval return.  The chosen actor is
+re-evaluated with more episodes, deterministic and stochastic (the stochastic score is what the dataset will show),
+copied to `policies/<env>-<level>.msgpack` and described in `policies/policies.json`.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from offrl_jax.data.generate.collect import MEDIUM_TARGET_SCORE, POLICY_DIR, POLICY_INDEX, evaluate, load_policy
+from offrl_jax.envs import normalized_score
+
+
+def read_log(run_dir: str | Path) -> list[dict[str, Any]]:
+    path = Path(run_dir) / "log.jsonl"
+    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+
+
+def select_checkpoint(run_dir: str | Path, level: str, env: str) -> dict[str, Any]:
+    """The log entry of the checkpoint for `level` ("medium" | "expert") in a run's evaluations."""
+    log = [e for e in read_log(run_dir) if (Path(run_dir) / e["checkpoint"]).exists()]
+    if not log:
+        raise FileNotFoundError(f"no evaluated checkpoints in {run_dir}")
+    if level == "medium":
+        target = MEDIUM_TARGET_SCORE[env]
+        return min(log, key=lambda e: abs(e["normalized_score"] - target))
+    if level == "expert":
+        return max(log, key=lambda e: e["eval_return"])
+    raise ValueError(f"level must be medium or expert, got {level}")
+
+
+def ship(run_dir: str | Path, level: str, step: int | None = None, episodes: int = 20, seed: int = 123,
+         dest: Path = POLICY_DIR) -> dict[str, Any]:
+    """Copy the chosen checkpoint of `run_dir` to `dest/<env>-<level>.msgpack` and record it in policies.json."""
+    run_dir = Path(run_dir)
+    run = json.loads((run_dir / "run.json").read_text())
+    env = run["env"]
+    if step is None:
+        entry = select_checkpoint(run_dir, level, env)
+    else:
+        entry = next(e for e in read_log(run_dir) if e["step"] == step)
+    src = run_dir / entry["checkpoint"]
+    params, meta = load_policy(src)
+    hidden = tuple(meta["hidden"])
+    det = evaluate(env, params, episodes, seed=seed, deterministic=True, hidden=hidden, num_envs=10)
+    sto = evaluate(env, params, episodes, seed=seed, deterministic=False, hidden=hidden, num_envs=10)
+    name = f"{env}-{level}"
+    dest.mkdir(parents=True, exist_ok=True)
+    shutil.copyfile(src, dest / f"{name}.msgpack")
+    record = {
+        "file": f"{name}.msgpack", "env": env, "gym_id": run["gym_id"], "level": level,
+        "sac_step": int(entry["step"]), "sac_seed": int(run["seed"]),
+        "obs_dim": meta["obs_dim"], "act_dim": meta["act_dim"], "hidden": list(hidden), "layer_norm": False,
+        "train_eval_return": round(float(entry["eval_return"]), 1),
+        "train_eval_normalized_score": round(float(entry["normalized_score"]), 2),
+        "verify_episodes": episodes,
+        "deterministic_return": round(float(det.mean()), 1),
+        "deterministic_normalized_score": round(float(normalized_score(env, det.mean())), 2),
+        "stochastic_return": round(float(sto.mean()), 1),
+        "stochastic_return_std": round(float(sto.std()), 1),
+        "stochastic_normalized_score": round(float(normalized_score(env, sto.mean())), 2),
+        "selection": ("closest train-eval score to D4RL medium target "
+                      f"{MEDIUM_TARGET_SCORE[env]}" if level == "medium" and step is None
+                      else "best train-eval return" if step is None else "chosen by hand"),
+        "size_bytes": (dest / f"{name}.msgpack").stat().st_size,
+    }
+    index_path = dest / POLICY_INDEX.name
+    index = json.loads(index_path.read_text()) if index_path.exists() else {}
+    index[name] = record
+    index_path.write_text(json.dumps(dict(sorted(index.items())), indent=1) + "\n")
+    return record
+
+
+def main(argv: list[str] | None = None) -> None:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--run", required=True, help="SAC run directory")
+    p.add_argument("--level", required=True, choices=["medium", "expert"])
+    p.add_argument("--step", type=int, default=None, help="ship this checkpoint instead of the automatic choice")
+    p.add_argument("--episodes", type=int, default=20, help="verification episodes")
+    p.add_argument("--list", action="store_true", help="only print the run's evaluations and the automatic choice")
+    a = p.parse_args(argv)
+    if a.list:
+        run = json.loads((Path(a.run) / "run.json").read_text())
+        for e in read_log(a.run):
+            print(f"{e['step']:>8d}  eval {e['eval_return']:8.1f}  norm {e['normalized_score']:6.1f}  "
+                  f"returns {np.round(e['eval_returns']).astype(int).tolist()}")
+        print("choice:", select_checkpoint(a.run, a.level, run["env"])["step"])
+        return
+    print(json.dumps(ship(a.run, a.level, a.step, a.episodes), indent=1))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,123 @@
+"""Dataset generation: SAC update / short training run, rollouts' episode flags, generate() -> minari, shipped policies."""
+from __future__ import annotations
+
+import json
+
+import jax
+import numpy as np
+import pytest
+
+from offrl_jax.data.generate.collect import POLICY_DIR
+from offrl_jax.data.generate import generate, shipped_policies
+from offrl_jax.data.generate.collect import collect, load_policy, make_policy
+from offrl_jax.data.generate.sac import SACConfig, load_replay, make_sac, train
+
+needs_medium = pytest.mark.skipif("hopper-medium" not in shipped_policies(), reason="no shipped hopper-medium policy")
+
+
+def _batch(rng: np.random.Generator, n: int, obs_dim: int = 11, act_dim: int = 3) -> dict[str, np.ndarray]:
+    return {
+        "observations": rng.normal(size=(n, obs_dim)).astype(np.float32),
+        "actions": rng.uniform(-1, 1, (n, act_dim)).astype(np.float32),
+        "rewards": rng.normal(size=n).astype(np.float32),
+        "next_observations": rng.normal(size=(n, obs_dim)).astype(np.float32),
+        "terminals": (rng.uniform(size=n) < 0.1).astype(np.float32),
+        "timeouts": np.zeros(n, np.float32),
+    }
+
+
+TINY = SACConfig(hidden=(32, 32), batch_size=32, warmup_steps=100)  # shared: the jitted step compiles once
+
+
+def test_sac_update_reduces_critic_loss():
+    sac = make_sac(11, 3, TINY)
+    state = sac.init(0)
+    batch = _batch(np.random.default_rng(0), TINY.batch_size)
+    obs = np.zeros(11, np.float32)
+    losses = []
+    for _ in range(100):
+        state, info, action = sac.update_and_act(state, batch, obs)
+        losses.append(float(info["critic_loss"]))
+    assert np.asarray(action).shape == (3,)
+    assert np.all(np.isfinite(losses))
+    assert np.mean(losses[-5:]) < 0.5 * losses[0]
+    # the temperature moves towards the target entropy and stays positive
+    assert 0.0 < float(info["alpha"]) < 1.0
+
+
+def test_sac_short_training_run(tmp_path):
+    run = train("hopper", 300, tmp_path, seed=0, cfg=TINY, eval_every=150, eval_episodes=1, progress=False,
+                max_episode_steps=50)
+    assert run["steps_done"] == 300 and run["stopped"] == "finished"
+    assert [c["step"] for c in run["checkpoints"]] == [150, 300]
+    log = [json.loads(line) for line in (tmp_path / "log.jsonl").read_text().splitlines()]
+    assert len(log) == 2 and np.isfinite(log[-1]["eval_return"])
+    replay = load_replay(tmp_path)
+    assert len(replay["rewards"]) == 300
+    ends = (replay["terminals"] + replay["timeouts"]) > 0
+    # within an episode the next observation is the following row's observation
+    assert np.array_equal(replay["next_observations"][:-1][~ends[:-1]], replay["observations"][1:][~ends[:-1]])
+    assert len(load_replay(tmp_path, upto=150)["rewards"]) == 150
+    params, meta = load_policy(tmp_path / "checkpoints" / "actor_0000300.msgpack")
+    assert meta["hidden"] == [32, 32] and meta["obs_dim"] == 11 and meta["act_dim"] == 3
+
+
+def test_collect_random_flags():
+    limit = 25
+    ds = collect("hopper", "random", 400, seed=0, num_envs=3, max_episode_steps=limit)
+    assert len(ds) == 400
+    assert not np.any((ds.terminals > 0) & (ds.timeouts > 0))
+    ends = np.flatnonzero(ds.episode_ends)
+    lengths = np.diff(np.concatenate([[-1], ends]))
+    assert lengths.max() <= limit
+    full = ends[:-1]  # the last episode may be cut by the transition budget
+    full_len = lengths[:-1]
+    timeouts, terminals = ds.timeouts[full] > 0, ds.terminals[full] > 0
+    assert np.all(timeouts | terminals)
+    assert np.all(full_len[timeouts] == limit)  # time-outs exactly at the time limit
+    assert terminals.any() and timeouts.any()
+    assert ds.terminals[ends[-1]] > 0 or ds.timeouts[ends[-1]] > 0
+    # flags only at episode ends, and s_{t+1} = next row's s within episodes (also recorded at time-outs)
+    assert (ds.terminals + ds.timeouts).sum() == len(ends)
+    inner = np.ones(len(ds), bool)
+    inner[ends] = False
+    assert np.array_equal(ds.next_observations[inner], ds.observations[1:][inner[:-1]])
+    assert not np.array_equal(ds.next_observations[ends[0]], ds.observations[ends[0] + 1])
+    assert np.all(np.abs(ds.actions) <= 1.0)
+
+
+@needs_medium
+def test_shipped_checkpoint_shapes():
+    meta_all = shipped_policies()
+    for name, meta in meta_all.items():
+        path = POLICY_DIR / meta["file"]
+        assert path.stat().st_size < 1_000_000, name
+    params, meta = load_policy("hopper-medium")
+    dense = params["params"]["MLP_0"]
+    assert dense["Dense_0"]["kernel"].shape == (11, 256)
+    assert dense["Dense_1"]["kernel"].shape == (256, 256)
+    assert dense["Dense_2"]["kernel"].shape == (256, 6)
+    assert meta["obs_dim"] == 11 and meta["act_dim"] == 3 and list(meta["hidden"]) == [256, 256]
+    act = make_policy(3, tuple(meta["hidden"]), stochastic=True)
+    a = np.asarray(act(params, np.zeros((4, 11), np.float32), jax.random.PRNGKey(0), 0))
+    assert a.shape == (4, 3) and np.all(np.abs(a) <= 1.0)
+
+
+@needs_medium
+def test_generate_hopper_medium_minari(tmp_path, monkeypatch):
+    import minari
+
+    out = generate("hopper-medium", transitions=2000, out_dir=tmp_path / "hopper-medium", progress=False, num_envs=4)
+    assert out == tmp_path / "hopper-medium"
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path))
+    ds = minari.load_dataset("hopper-medium")
+    assert ds.total_steps == 2000
+    episodes = list(ds.iterate_episodes())
+    assert sum(len(ep.rewards) for ep in episodes) == 2000
+    assert all(ep.terminations[-1] or ep.truncations[-1] for ep in episodes)
+    assert ds.storage.metadata["ref_max_score"] == pytest.approx(3234.3)
+    info = json.loads((out / "offrl_jax.json").read_text())
+    assert info["env"] == "hopper" and info["seed"] == 0 and info["source"]["policy"]["file"]
+    assert info["stats"]["transitions"] == 2000
+    with pytest.raises(FileExistsError):
+        generate("hopper-medium", transitions=2000, out_dir=out, progress=False)
