@@ -1,0 +1,97 @@
+"""What every algorithm shares: a trainable `Model` (params + target + optimiser state), the `Phase` record the
+driver runs, and small helpers to take a gradient step and to chain update functions.
+
+An algorithm is a frozen config plus pure functions:
+    init(key) -> AgentState                                  (a pytree of arrays: vmappable over seeds, checkpointable)
+    phases(total_updates) -> list[Phase]                     (pre-training phases, then offline RL)
+    act(state, obs) -> action                                (deterministic policy for evaluation)
+Each `Phase.update(state, batch, key) -> (state, metrics)` is one scan body; batch leaves are (k, B, ...) with
+k = `Phase.updates_per_call` minibatches (k = 2 for TD3's delayed actor update).
+"""
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, Callable
+
+import jax
+import jax.numpy as jnp
+import optax
+from flax import struct
+
+Params = Any
+Batch = dict[str, jax.Array]
+Metrics = dict[str, jax.Array]
+UpdateFn = Callable[[Any, Batch, jax.Array], tuple[Any, Metrics]]
+
+
+@struct.dataclass
+class Model:
+    params: Params
+    opt_state: optax.OptState
+    target: Params | None = None
+
+
+def new_model(params: Params, tx: optax.GradientTransformation, with_target: bool) -> Model:
+    return Model(params=params, opt_state=tx.init(params), target=params if with_target else None)
+
+
+def gradient_step(model: Model, tx: optax.GradientTransformation, loss_fn: Callable, *args) -> tuple[Model, Metrics]:
+    """One optimiser step on `loss_fn(params, *args) -> (loss, metrics)`; returns the new model and the metrics."""
+    grads, metrics = jax.grad(loss_fn, has_aux=True)(model.params, *args)
+    updates, opt_state = tx.update(grads, model.opt_state, model.params)
+    return model.replace(params=optax.apply_updates(model.params, updates), opt_state=opt_state), metrics
+
+
+def polyak(model: Model, tau: float) -> Model:
+    """target <- tau * params + (1 - tau) * target."""
+    return model.replace(target=optax.incremental_update(model.params, model.target, tau))
+
+
+@dataclasses.dataclass(frozen=True)
+class Phase:
+    name: str  # "actor_pretrain", "critic_pretrain", "pretrain", "offline_rl"
+    update: UpdateFn
+    steps: int  # gradient updates in this phase (a multiple of updates_per_call)
+    updates_per_call: int = 1
+    # Called once (jitted, vmapped over seeds) before the phase starts: (state, data, key) -> state.
+    on_start: Callable[[Any, Batch, jax.Array], Any] | None = None
+
+
+def first(batch: Batch, i: int = 0) -> Batch:
+    """The i-th of the k stacked minibatches."""
+    return jax.tree.map(lambda x: x[i], batch)
+
+
+def chain(*updates: UpdateFn) -> UpdateFn:
+    """Run several single-batch update functions on the same minibatch, one after another; merge their metrics."""
+
+    def update(state, batch: Batch, key: jax.Array):
+        metrics: Metrics = {}
+        for fn, k in zip(updates, jax.random.split(key, len(updates))):
+            state, m = fn(state, batch, k)
+            metrics.update(m)
+        return state, metrics
+
+    return update
+
+
+def single(update: UpdateFn) -> UpdateFn:
+    """Adapt a single-minibatch update to the driver's stacked (1, B, ...) batch."""
+    return lambda state, batch, key: update(state, first(batch), key)
+
+
+def split_budget(total: int, pretrain: int) -> tuple[int, int]:
+    """(pre-training updates, RL updates): pre-training counts inside the total budget."""
+    if pretrain > total:
+        raise ValueError(f"pre-training updates ({pretrain}) exceed the total budget ({total})")
+    return pretrain, total - pretrain
+
+
+def uniform_actions(key: jax.Array, batch: int, num: int, act_dim: int) -> jax.Array:
+    """(B, M, A) actions uniform in [-1, 1]."""
+    return jax.random.uniform(key, (batch, num, act_dim), minval=-1.0, maxval=1.0)
+
+
+def repeat_obs(obs: jax.Array, num: int) -> jax.Array:
+    """(B, D) -> (B, M, D)."""
+    return jnp.broadcast_to(obs[:, None], (obs.shape[0], num, obs.shape[1]))

@@ -1,0 +1,243 @@
+"""The 'soft' family: a tanh-Gaussian actor, an ensemble of N critics and a learned temperature.
+
+    SAC-N    = SAC with the min over N critics
+    EDAC     = SAC-N + eta * ensemble-diversity loss on the critics
+    EDAC+BC  = EDAC with the actor loss balanced against MSE(sampled action, dataset action) (Appendix G)
+    CQL      = SAC with N = 2 + alpha_cql * CORL's importance-sampled CQL penalty (no entropy in the backup)
+
+Pre-training (Alg. 2): soft BC with the temperature tuned (`actor`), then soft returns-to-go computed once with that
+actor and alpha, then critic regression on them with the diversity loss as regulariser (`critic`), then offline RL
+with alpha carried over.  `actor+critic` runs both phases in that order (the paper's procedure for soft algorithms).
+"""
+from __future__ import annotations
+
+import dataclasses
+from typing import Literal
+
+import jax
+import jax.numpy as jnp
+import optax
+from flax import struct
+
+from offrl_jax import losses as L
+from offrl_jax.algos.common import (
+    Batch,
+    Model,
+    Phase,
+    chain,
+    gradient_step,
+    new_model,
+    polyak,
+    repeat_obs,
+    single,
+    split_budget,
+    uniform_actions,
+)
+from offrl_jax.data.returns import soft_returns_to_go
+from offrl_jax.nets import CriticEnsemble, TanhGaussianActor, sample_tanh_gaussian, tanh_gaussian_log_prob
+
+
+@dataclasses.dataclass(frozen=True)
+class EDACConfig:
+    num_critics: int = 10
+    eta: float = 1.0  # diversity weight (0 = SAC-N)
+    actor_lr: float = 3e-4
+    critic_lr: float = 3e-4
+    alpha_lr: float = 3e-4
+    gamma: float = 0.99
+    tau: float = 0.005
+    hidden: tuple[int, ...] = (256, 256, 256)
+    actor_layer_norm: bool = True
+    critic_layer_norm: bool = True
+    init_alpha: float = 1.0
+    backup_entropy: bool = True  # subtract alpha log pi(a'|s') in the TD target
+    bc_weight: float = 0.0  # EDAC+BC: actor loss = SAC/sg|SAC| + bc_weight * MSE/sg|MSE| (0 = off)
+    cql_alpha: float = 0.0  # CQL: critic loss = TD + cql_alpha * CQL penalty (0 = off)
+    cql_actions: int = 10
+    cql_temperature: float = 1.0
+    pretrain: Literal["none", "actor", "critic", "actor+critic"] = "actor+critic"
+    pretrain_updates: int = 20_000  # split between soft BC and critic regression by actor_pretrain_fraction
+    actor_pretrain_fraction: float = 0.5
+    lam: float = 0.0
+    lambda_mode: Literal["loss", "target"] = "loss"
+    entropy_batch: int = 16_384  # rows per batch when computing the per-state entropies for the soft returns
+
+
+@struct.dataclass
+class EDACState:
+    actor: Model
+    critic: Model
+    log_alpha: Model
+    soft_returns: jax.Array  # (T,) soft returns-to-go of this seed's own soft-BC policy (zeros until computed)
+
+
+class EDAC:
+    def __init__(self, config: EDACConfig, obs_dim: int, act_dim: int, num_transitions: int):
+        self.cfg, self.obs_dim, self.act_dim, self.num_transitions = config, obs_dim, act_dim, num_transitions
+        self.actor = TanhGaussianActor(act_dim, config.hidden, config.actor_layer_norm)
+        critic_kw = dict(num=config.num_critics, hidden=config.hidden, layer_norm=config.critic_layer_norm,
+                         out_scale=3e-3)
+        self.critic = CriticEnsemble(**critic_kw)
+        self.critic_per_member = CriticEnsemble(**critic_kw, per_member_actions=True)  # same parameters
+        self.actor_tx, self.critic_tx = optax.adam(config.actor_lr), optax.adam(config.critic_lr)
+        self.alpha_tx = optax.adam(config.alpha_lr)
+        self.target_entropy = -float(act_dim)
+
+    # ------------------------------------------------------------------------------------------------ set-up
+    def init(self, key: jax.Array) -> EDACState:
+        k_actor, k_critic = jax.random.split(key)
+        obs, act = jnp.zeros((1, self.obs_dim)), jnp.zeros((1, self.act_dim))
+        log_alpha = jnp.asarray(jnp.log(self.cfg.init_alpha), jnp.float32)
+        return EDACState(
+            actor=new_model(self.actor.init(k_actor, obs), self.actor_tx, with_target=False),
+            critic=new_model(self.critic.init(k_critic, obs, act), self.critic_tx, with_target=True),
+            log_alpha=new_model(log_alpha, self.alpha_tx, with_target=False),
+            soft_returns=jnp.zeros((self.num_transitions,), jnp.float32),
+        )
+
+    def act(self, state: EDACState, obs: jax.Array) -> jax.Array:
+        mean, _ = self.actor.apply(state.actor.params, obs)
+        return jnp.tanh(mean)
+
+    def phases(self, total_updates: int) -> list[Phase]:
+        cfg = self.cfg
+        pre, rl = split_budget(total_updates, 0 if cfg.pretrain == "none" else cfg.pretrain_updates)
+        actor_steps = {"actor": pre, "critic": 0, "actor+critic": int(pre * cfg.actor_pretrain_fraction)}.get(
+            cfg.pretrain, 0)
+        critic_steps = pre - actor_steps
+        phases = []
+        if actor_steps:
+            phases.append(Phase("actor_pretrain", single(chain(self.temperature_update, self.soft_bc_update)),
+                                actor_steps))
+        if critic_steps:
+            phases.append(Phase("critic_pretrain", single(self.soft_mc_update), critic_steps,
+                                on_start=self.compute_soft_returns))
+        return phases + [Phase("offline_rl", single(self.rl_update), rl)]
+
+    # ---------------------------------------------------------------------------------------- soft returns
+    def compute_soft_returns(self, state: EDACState, data: Batch, key: jax.Array) -> EDACState:
+        """Entropy -log pi(a~|s') at every next observation (in batches), folded into soft returns-to-go."""
+        next_obs = data["next_observations"]
+        n, size = next_obs.shape[0], self.cfg.entropy_batch
+        pad = (-n) % size
+        chunks = jnp.pad(next_obs, ((0, pad), (0, 0))).reshape(-1, size, next_obs.shape[1])
+
+        def entropy(args):
+            obs, k = args
+            _, log_prob = sample_tanh_gaussian(k, *self.actor.apply(state.actor.params, obs))
+            return -log_prob
+
+        keys = jax.random.split(key, chunks.shape[0])
+        entropies = jax.lax.map(entropy, (chunks, keys)).reshape(-1)[:n]
+        alpha = jnp.exp(state.log_alpha.params)
+        returns = soft_returns_to_go(data["rewards"], entropies, data["terminals"], data["timeouts"],
+                                     self.cfg.gamma, alpha)
+        return state.replace(soft_returns=returns)
+
+    # --------------------------------------------------------------------------------------------- pieces
+    def sample_policy(self, actor_params, obs: jax.Array, key: jax.Array):
+        return sample_tanh_gaussian(key, *self.actor.apply(actor_params, obs))
+
+    def td_target(self, state: EDACState, batch: Batch, key: jax.Array) -> jax.Array:
+        next_action, next_log_prob = self.sample_policy(state.actor.params, batch["next_observations"], key)
+        next_q = self.critic.apply(state.critic.target, batch["next_observations"], next_action)
+        alpha = jnp.exp(state.log_alpha.params) if self.cfg.backup_entropy else 0.0
+        return L.td_target(batch["rewards"], batch["terminals"], L.soft_value(next_q, next_log_prob, alpha),
+                           self.cfg.gamma)
+
+    def q_and_diversity(self, params, batch: Batch) -> tuple[jax.Array, jax.Array]:
+        """Q (N, B) at the dataset actions and the diversity loss, from one forward pass.
+
+        d/da sum_b Q_i(s_b, a_b) gives every sample's action gradient at once (no per-sample Jacobians).
+        """
+        actions = jnp.broadcast_to(batch["actions"], (self.cfg.num_critics, *batch["actions"].shape))
+        q, vjp = jax.vjp(lambda a: self.critic_per_member.apply(params, batch["observations"], a), actions)
+        if self.cfg.eta == 0:
+            return q, jnp.zeros(())
+        (grads,) = vjp(jnp.ones_like(q))
+        return q, L.edac_diversity_loss(grads)
+
+    def cql_penalty(self, params, state: EDACState, batch: Batch, q_data: jax.Array, key: jax.Array):
+        m, obs, next_obs = self.cfg.cql_actions, batch["observations"], batch["next_observations"]
+        k_rand, k_pi, k_next = jax.random.split(key, 3)
+        obs_m = repeat_obs(obs, m)
+        a_pi, logp_pi = self.sample_policy(state.actor.params, obs_m, k_pi)
+        a_next, logp_next = self.sample_policy(state.actor.params, repeat_obs(next_obs, m), k_next)
+        q_rand = self.critic.apply(params, obs_m, uniform_actions(k_rand, obs.shape[0], m, self.act_dim))
+        q_pi, q_next = self.critic.apply(params, obs_m, a_pi), self.critic.apply(params, obs_m, a_next)
+        return L.cql_importance_penalty(q_rand, q_pi, logp_pi, q_next, logp_next, q_data, self.act_dim,
+                                        self.cfg.cql_temperature)
+
+    # ---------------------------------------------------------------------------------------------- losses
+    def critic_loss(self, params, state: EDACState, batch: Batch, key: jax.Array, pretraining: bool):
+        cfg = self.cfg
+        k_target, k_cql = jax.random.split(key)
+        q, diversity = self.q_and_diversity(params, batch)
+        if pretraining:
+            mc = state.soft_returns[batch["idx"]]
+            if cfg.lam == 0.0:
+                loss = L.mc_critic_loss(q, mc)
+            elif cfg.lambda_mode == "target":
+                loss = L.critic_regression_loss(q, L.mix_targets(mc, self.td_target(state, batch, k_target), cfg.lam))
+            else:
+                td_loss = L.critic_regression_loss(q, self.td_target(state, batch, k_target))
+                loss = L.mix_losses(L.mc_critic_loss(q, mc), td_loss, cfg.lam)
+            metrics = {"mc_error": jnp.mean((q - mc[None]) ** 2)}
+        else:
+            loss = L.critic_regression_loss(q, self.td_target(state, batch, k_target))
+            metrics = {}
+        metrics |= {"critic_loss": loss, "q_mean": jnp.mean(q), "diversity": diversity}
+        if cfg.cql_alpha > 0:
+            penalty = self.cql_penalty(params, state, batch, q, k_cql)
+            loss = loss + cfg.cql_alpha * penalty
+            metrics["cql_penalty"] = penalty
+        return loss + cfg.eta * diversity, metrics
+
+    def actor_loss(self, params, state: EDACState, batch: Batch, key: jax.Array):
+        action, log_prob = self.sample_policy(params, batch["observations"], key)
+        q = self.critic.apply(state.critic.params, batch["observations"], action)
+        loss = L.sac_actor_loss(q, log_prob, jnp.exp(state.log_alpha.params))
+        metrics = {"actor_loss": loss, "entropy": -jnp.mean(log_prob)}
+        if self.cfg.bc_weight > 0:
+            bc = L.bc_loss(action, batch["actions"])
+            loss = L.balance_losses(loss, bc, self.cfg.bc_weight)
+            metrics["bc_mse"] = bc
+        return loss, metrics
+
+    def soft_bc_loss(self, params, state: EDACState, batch: Batch, key: jax.Array):
+        mean, log_std = self.actor.apply(params, batch["observations"])
+        _, log_prob_sampled = sample_tanh_gaussian(key, mean, log_std)
+        log_prob_data = tanh_gaussian_log_prob(mean, log_std, batch["actions"])
+        loss = L.soft_bc_loss(log_prob_sampled, log_prob_data, jnp.exp(state.log_alpha.params))
+        return loss, {"soft_bc_loss": loss, "entropy": -jnp.mean(log_prob_sampled)}
+
+    # ------------------------------------------------------------------------------------ update functions
+    def temperature_update(self, state: EDACState, batch: Batch, key: jax.Array):
+        _, log_prob = self.sample_policy(state.actor.params, batch["observations"], key)
+
+        def loss_fn(log_alpha):
+            loss = L.temperature_loss(log_alpha, log_prob, self.target_entropy)
+            return loss, {"alpha": jnp.exp(log_alpha), "alpha_loss": loss}
+
+        log_alpha, metrics = gradient_step(state.log_alpha, self.alpha_tx, loss_fn)
+        return state.replace(log_alpha=log_alpha), metrics
+
+    def soft_bc_update(self, state: EDACState, batch: Batch, key: jax.Array):
+        actor, metrics = gradient_step(state.actor, self.actor_tx, self.soft_bc_loss, state, batch, key)
+        return state.replace(actor=actor), metrics
+
+    def actor_update(self, state: EDACState, batch: Batch, key: jax.Array):
+        actor, metrics = gradient_step(state.actor, self.actor_tx, self.actor_loss, state, batch, key)
+        return state.replace(actor=actor), metrics
+
+    def soft_mc_update(self, state: EDACState, batch: Batch, key: jax.Array):
+        critic, metrics = gradient_step(state.critic, self.critic_tx, self.critic_loss, state, batch, key, True)
+        return state.replace(critic=polyak(critic, self.cfg.tau)), metrics
+
+    def td_update(self, state: EDACState, batch: Batch, key: jax.Array):
+        critic, metrics = gradient_step(state.critic, self.critic_tx, self.critic_loss, state, batch, key, False)
+        return state.replace(critic=polyak(critic, self.cfg.tau)), metrics
+
+    def rl_update(self, state: EDACState, batch: Batch, key: jax.Array):
+        """CORL's order: temperature, actor, critic (+ target), all on one minibatch."""
+        return chain(self.temperature_update, self.actor_update, self.td_update)(state, batch, key)

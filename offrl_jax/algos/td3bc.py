@@ -1,0 +1,176 @@
+"""The 'hard' family: a deterministic tanh actor and an ensemble of (twin) critics.
+
+    BC           = the actor pre-training phase for the whole budget
+    TD3+BC       = TD3 critic (clipped double-Q, smoothed target action) + TD3+BC actor (-lmbda Q + MSE)
+    TD3+BC+CQL   = TD3+BC with the critic loss balanced against the uniform-action CQL penalty (Adroit, Table 3)
+    target='max_mc' replaces the TD target by max(MC, TD) (Q-Transformer, Appendix F)
+
+Pre-training (Alg. 1): `actor` = BC, `critic` = MC regression (optionally lambda-mixed with TD), `actor+critic` = both
+at once on the same minibatch, target networks Polyak-updated throughout.
+"""
+from __future__ import annotations
+
+import dataclasses
+from typing import Literal
+
+import jax
+import jax.numpy as jnp
+import optax
+from flax import struct
+
+from offrl_jax import losses as L
+from offrl_jax.algos.common import (
+    Batch,
+    Model,
+    Phase,
+    chain,
+    first,
+    gradient_step,
+    new_model,
+    polyak,
+    repeat_obs,
+    single,
+    split_budget,
+    uniform_actions,
+)
+from offrl_jax.nets import CriticEnsemble, DeterministicActor
+
+PretrainMode = Literal["none", "actor", "critic", "actor+critic"]
+
+
+@dataclasses.dataclass(frozen=True)
+class TD3BCConfig:
+    alpha: float = 2.5  # TD3+BC's actor regularisation (hopper 10, halfcheetah 20, walker2d 5, Adroit 0.1 / pen 1)
+    actor_lr: float = 3e-4
+    critic_lr: float = 3e-4
+    gamma: float = 0.99
+    tau: float = 0.005
+    policy_noise: float = 0.2
+    noise_clip: float = 0.5
+    policy_delay: int = 2
+    hidden: tuple[int, ...] = (256, 256)
+    actor_layer_norm: bool = True
+    critic_layer_norm: bool = True
+    num_critics: int = 2
+    # TD3+BC+CQL: critic loss = TD/sg|TD| + cql_weight * CQL/sg|CQL| (0 = off)
+    cql_weight: float = 0.0
+    cql_actions: int = 10
+    cql_temperature: float = 1.0
+    # pre-training
+    pretrain: PretrainMode = "actor+critic"
+    pretrain_updates: int = 10_000
+    lam: float = 0.0  # TD weight in critic pre-training
+    lambda_mode: Literal["loss", "target"] = "loss"  # authors' normalised-loss mixing, or eq. 5 target mixing
+    target: Literal["td", "max_mc"] = "td"  # offline-RL critic target; max_mc = Q-Transformer's max(MC, TD)
+    bc_only: bool = False  # the BC baseline: actor pre-training for the whole budget
+
+
+@struct.dataclass
+class TD3BCState:
+    actor: Model
+    critic: Model
+
+
+class TD3BC:
+    def __init__(self, config: TD3BCConfig, obs_dim: int, act_dim: int):
+        self.cfg, self.obs_dim, self.act_dim = config, obs_dim, act_dim
+        self.actor = DeterministicActor(act_dim, config.hidden, config.actor_layer_norm)
+        self.critic = CriticEnsemble(config.num_critics, config.hidden, config.critic_layer_norm)
+        self.actor_tx = optax.adam(config.actor_lr)
+        self.critic_tx = optax.adam(config.critic_lr)
+
+    # ------------------------------------------------------------------------------------------------ set-up
+    def init(self, key: jax.Array) -> TD3BCState:
+        k_actor, k_critic = jax.random.split(key)
+        obs, act = jnp.zeros((1, self.obs_dim)), jnp.zeros((1, self.act_dim))
+        return TD3BCState(
+            actor=new_model(self.actor.init(k_actor, obs), self.actor_tx, with_target=True),
+            critic=new_model(self.critic.init(k_critic, obs, act), self.critic_tx, with_target=True),
+        )
+
+    def act(self, state: TD3BCState, obs: jax.Array) -> jax.Array:
+        return self.actor.apply(state.actor.params, obs)
+
+    def phases(self, total_updates: int) -> list[Phase]:
+        cfg = self.cfg
+        if cfg.bc_only:
+            return [Phase("actor_pretrain", single(self.bc_update), total_updates)]
+        pre_updates = 0 if cfg.pretrain == "none" else cfg.pretrain_updates
+        pre, rl = split_budget(total_updates, pre_updates)
+        pretrain_fn = {
+            "actor": self.bc_update,
+            "critic": self.mc_update,
+            "actor+critic": chain(self.bc_update, self.mc_update),
+        }.get(cfg.pretrain)
+        phases = [Phase("pretrain", single(pretrain_fn), pre)] if pre else []
+        rl -= rl % cfg.policy_delay
+        return phases + [Phase("offline_rl", self.rl_update, rl, updates_per_call=cfg.policy_delay)]
+
+    # --------------------------------------------------------------------------------------------- targets
+    def td_target(self, state: TD3BCState, batch: Batch, key: jax.Array) -> jax.Array:
+        next_action = self.actor.apply(state.actor.target, batch["next_observations"])
+        next_action = L.target_policy_smoothing(key, next_action, self.cfg.policy_noise, self.cfg.noise_clip)
+        next_q = self.critic.apply(state.critic.target, batch["next_observations"], next_action)
+        return L.td_target(batch["rewards"], batch["terminals"], L.clipped_double_q(next_q), self.cfg.gamma)
+
+    def cql_penalty(self, params, batch: Batch, q_data: jax.Array, key: jax.Array) -> jax.Array:
+        obs = repeat_obs(batch["observations"], self.cfg.cql_actions)
+        acts = uniform_actions(key, obs.shape[0], self.cfg.cql_actions, self.act_dim)
+        q_uniform = self.critic.apply(params, obs, acts)  # (N, B, M)
+        return L.cql_uniform_penalty(q_uniform, q_data, self.cfg.cql_temperature)
+
+    # ---------------------------------------------------------------------------------------- critic losses
+    def critic_loss(self, params, state, batch: Batch, key: jax.Array, pretraining: bool):
+        cfg = self.cfg
+        k_target, k_cql = jax.random.split(key)
+        q = self.critic.apply(params, batch["observations"], batch["actions"])  # (N, B)
+        mc = batch["returns"]
+        if pretraining and cfg.lam == 0.0:
+            loss = L.mc_critic_loss(q, mc)
+        else:
+            td = self.td_target(state, batch, k_target)
+            if not pretraining:
+                target = L.q_transformer_target(mc, td) if cfg.target == "max_mc" else td
+                loss = L.critic_regression_loss(q, target)
+            elif cfg.lambda_mode == "target":
+                loss = L.critic_regression_loss(q, L.mix_targets(mc, td, cfg.lam))
+            else:
+                loss = L.mix_losses(L.mc_critic_loss(q, mc), L.critic_regression_loss(q, td), cfg.lam)
+        metrics = {"critic_loss": loss, "q_mean": jnp.mean(q), "mc_error": jnp.mean((q[0] - mc) ** 2)}
+        if cfg.cql_weight > 0:
+            penalty = self.cql_penalty(params, batch, q, k_cql)
+            loss = L.balance_losses(loss, penalty, cfg.cql_weight)
+            metrics["cql_penalty"] = penalty
+        return loss, metrics
+
+    def actor_loss(self, params, state, batch: Batch):
+        pi = self.actor.apply(params, batch["observations"])
+        q = self.critic.apply(state.critic.params, batch["observations"], pi)[0]
+        loss = L.td3bc_actor_loss(q, pi, batch["actions"], self.cfg.alpha)
+        return loss, {"actor_loss": loss, "bc_mse": L.bc_loss(pi, batch["actions"])}
+
+    # --------------------------------------------------------------------------------------- update functions
+    def bc_update(self, state: TD3BCState, batch: Batch, key: jax.Array):
+        def loss_fn(params):
+            loss = L.bc_loss(self.actor.apply(params, batch["observations"]), batch["actions"])
+            return loss, {"bc_loss": loss}
+
+        actor, metrics = gradient_step(state.actor, self.actor_tx, loss_fn)
+        return state.replace(actor=polyak(actor, self.cfg.tau)), metrics
+
+    def mc_update(self, state: TD3BCState, batch: Batch, key: jax.Array):
+        critic, metrics = gradient_step(state.critic, self.critic_tx, self.critic_loss, state, batch, key, True)
+        return state.replace(critic=polyak(critic, self.cfg.tau)), metrics
+
+    def td_update(self, state: TD3BCState, batch: Batch, key: jax.Array):
+        critic, metrics = gradient_step(state.critic, self.critic_tx, self.critic_loss, state, batch, key, False)
+        return state.replace(critic=critic), metrics
+
+    def rl_update(self, state: TD3BCState, batches: Batch, key: jax.Array):
+        """policy_delay critic updates, then one actor update and the target updates (TD3's delayed schedule)."""
+        keys = jax.random.split(key, self.cfg.policy_delay)
+        for i in range(self.cfg.policy_delay):
+            state, metrics = self.td_update(state, first(batches, i), keys[i])
+        actor, actor_metrics = gradient_step(state.actor, self.actor_tx, self.actor_loss, state, first(batches, -1))
+        tau = self.cfg.tau
+        return state.replace(actor=polyak(actor, tau), critic=polyak(state.critic, tau)), metrics | actor_metrics

@@ -1,0 +1,124 @@
+"""The training driver: a run is a list of phases; between evaluations it runs K updates as one jitted `lax.scan`,
+sampling minibatches on the device inside the scan, for S seeds at once with `jax.vmap` over the whole agent state.
+
+Randomness is a pure function of (seed, global update index), so seed i of a vmapped run equals a single run with
+seed i, and a resumed run continues exactly where it stopped.
+"""
+from __future__ import annotations
+
+import dataclasses
+import time
+from typing import Any, Callable, Iterator
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from offrl_jax.algos.common import Phase
+from offrl_jax.data.dataset import Dataset, normalize_obs
+from offrl_jax.data.returns import returns_to_go
+
+DATA_FIELDS = ("observations", "actions", "rewards", "next_observations", "terminals", "timeouts", "returns")
+
+
+def device_data(ds: Dataset, gamma: float, timeout_tail: bool = True) -> tuple[dict[str, jax.Array], tuple]:
+    """Normalised observations + Monte-Carlo returns-to-go on the device (once, shared by every seed)."""
+    mean, std = ds.obs_stats()
+    data = {
+        "observations": normalize_obs(ds.observations, mean, std),
+        "next_observations": normalize_obs(ds.next_observations, mean, std),
+        "actions": ds.actions,
+        "rewards": ds.rewards,
+        "terminals": ds.terminals,
+        "timeouts": ds.timeouts,
+    }
+    data = {k: jnp.asarray(v, jnp.float32) for k, v in data.items()}
+    data["returns"] = returns_to_go(data["rewards"], data["terminals"], data["timeouts"], gamma, timeout_tail)
+    return data, (mean, std)
+
+
+def seed_keys(seeds: tuple[int, ...], stream: int, index: int) -> jax.Array:
+    """(S, 2) keys: fold_in(fold_in(PRNGKey(seed), stream), index) for every seed."""
+    return jnp.stack([jax.random.fold_in(jax.random.fold_in(jax.random.PRNGKey(s), stream), index) for s in seeds])
+
+
+INIT, CHUNK, PHASE_START = 0, 1, 2  # key streams
+
+
+def make_chunk_fn(phase: Phase, batch_size: int, num_calls: int) -> Callable:
+    """jit(vmap(scan of `num_calls` update calls)): (states (S..), data, keys (S, 2)) -> (states, metrics (S, ...))."""
+
+    def one_seed(state, data, key):
+        n = data["rewards"].shape[0]
+
+        def body(state, key):
+            k_idx, k_update = jax.random.split(key)
+            idx = jax.random.randint(k_idx, (phase.updates_per_call, batch_size), 0, n)
+            batch = {k: data[k][idx] for k in DATA_FIELDS} | {"idx": idx}
+            return phase.update(state, batch, k_update)
+
+        state, metrics = jax.lax.scan(body, state, jax.random.split(key, num_calls))
+        finite = jnp.all(jnp.stack([jnp.all(jnp.isfinite(m)) for m in jax.tree.leaves(metrics)]))
+        finite &= jnp.all(jnp.stack([jnp.all(jnp.isfinite(p)) for p in jax.tree.leaves(state)]))
+        return state, jax.tree.map(lambda m: jnp.mean(m, axis=0), metrics) | {"finite": finite}
+
+    return jax.jit(jax.vmap(one_seed, in_axes=(0, None, 0)), donate_argnums=0)
+
+
+@dataclasses.dataclass
+class Chunk:
+    """What the driver reports after each chunk of updates."""
+
+    phase: str
+    update: int  # global updates done (pre-training included)
+    states: Any  # agent states, leading axis S
+    metrics: dict[str, np.ndarray]  # each (S,)
+    seconds: float  # wall-clock seconds of training so far (compilation included, evaluation excluded)
+    updates_per_s: float
+
+
+class Driver:
+    def __init__(self, algo, data: dict[str, jax.Array], seeds: tuple[int, ...], batch_size: int = 256):
+        self.algo, self.data, self.seeds, self.batch_size = algo, data, tuple(seeds), batch_size
+        self._chunk_fns: dict[tuple[str, int], Callable] = {}
+
+    def init(self) -> Any:
+        states = jax.vmap(self.algo.init)(seed_keys(self.seeds, INIT, 0))
+        # Targets start equal to params; give every leaf its own buffer so the chunk function can donate them.
+        return jax.tree.map(lambda x: jnp.array(x, copy=True), states)
+
+    def _chunk_fn(self, phase: Phase, num_calls: int) -> Callable:
+        key = (phase.name, num_calls)
+        if key not in self._chunk_fns:
+            self._chunk_fns[key] = make_chunk_fn(phase, self.batch_size, num_calls)
+        return self._chunk_fns[key]
+
+    def run(self, phases: list[Phase], chunk_updates: int, states: Any = None, start_update: int = 0,
+            seconds: float = 0.0) -> Iterator[Chunk]:
+        """Run `phases` in order, yielding after every `chunk_updates` updates and at every phase end.
+
+        `states`/`start_update`/`seconds` resume a run from a checkpoint taken at a chunk boundary.
+        """
+        states = self.init() if states is None else states
+        phase_start = 0
+        for index, phase in enumerate(phases):
+            phase_end = phase_start + phase.steps
+            if start_update >= phase_end:
+                phase_start = phase_end
+                continue
+            if phase.on_start is not None and start_update == phase_start:
+                hook = jax.jit(jax.vmap(phase.on_start, in_axes=(0, None, 0)))
+                states = hook(states, self.data, seed_keys(self.seeds, PHASE_START, index))
+            update = max(start_update, phase_start)
+            while update < phase_end:
+                n = min(chunk_updates - update % chunk_updates, phase_end - update)  # align chunks globally
+                calls = max(1, n // phase.updates_per_call)
+                tic = time.perf_counter()
+                states, metrics = self._chunk_fn(phase, calls)(states, self.data, seed_keys(self.seeds, CHUNK, update))
+                metrics = jax.tree.map(np.asarray, metrics)
+                elapsed = time.perf_counter() - tic
+                seconds += elapsed
+                update += calls * phase.updates_per_call
+                yield Chunk(phase.name, update, states, metrics, seconds, calls * phase.updates_per_call / elapsed)
+            phase_start = phase_end
+            start_update = update

@@ -1,0 +1,126 @@
+"""Every loss against a value computed by hand (the arithmetic is in the comments)."""
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from offrl_jax import losses as L
+
+A = np.testing.assert_allclose
+
+
+def test_bc_loss():
+    # mean((0-1)^2, (1-1)^2) = 0.5
+    A(L.bc_loss(jnp.array([[0.0, 1.0]]), jnp.array([[1.0, 1.0]])), 0.5)
+
+
+def test_soft_bc_loss():
+    # mean(2*1 - 0.5, 2*2 - 1) = mean(1.5, 3) = 2.25
+    A(L.soft_bc_loss(jnp.array([1.0, 2.0]), jnp.array([0.5, 1.0]), jnp.array(2.0)), 2.25)
+
+
+def test_mc_critic_loss_sums_critics_of_batch_means():
+    # critic 0: mean(0, 1) = 0.5; critic 1: mean(4, 9) = 6.5; sum = 7
+    A(L.mc_critic_loss(jnp.array([[1.0, 2.0], [3.0, 4.0]]), jnp.array([1.0, 1.0])), 7.0)
+
+
+def test_td_target_bootstraps_unless_terminal():
+    # [1 + 0.9*10, 1 + 0] = [10, 1]
+    A(L.td_target(jnp.array([1.0, 1.0]), jnp.array([0.0, 1.0]), jnp.array([10.0, 10.0]), 0.9), [10.0, 1.0])
+
+
+def test_clipped_double_q_and_soft_value():
+    q = jnp.array([[1.0, 5.0], [3.0, 2.0]])
+    A(L.clipped_double_q(q), [1.0, 2.0])
+    # min - alpha*logp = [1 - 2*0.5, 2 - 2*(-1)] = [0, 4]
+    A(L.soft_value(q, jnp.array([0.5, -1.0]), 2.0), [0.0, 4.0])
+
+
+def test_target_policy_smoothing_bounds():
+    a = jnp.full((1000, 3), 0.9)
+    smoothed = L.target_policy_smoothing(jax.random.PRNGKey(0), a, noise=0.2, clip=0.5)
+    assert float(jnp.max(smoothed)) <= 1.0 and float(jnp.min(smoothed)) >= 0.4 - 1e-6
+    A(L.target_policy_smoothing(jax.random.PRNGKey(0), a, noise=0.0), a)
+
+
+def test_mix_targets_and_q_transformer():
+    # 0.9*10 + 0.1*0 = 9
+    A(L.mix_targets(jnp.array([10.0]), jnp.array([0.0]), 0.1), [9.0])
+    A(L.q_transformer_target(jnp.array([1.0, 5.0]), jnp.array([3.0, 2.0])), [3.0, 5.0])
+
+
+def test_critic_regression_loss_stops_target_gradient():
+    grad = jax.grad(lambda t: L.critic_regression_loss(jnp.array([[0.0]]), t))(jnp.array([1.0]))
+    A(grad, [0.0])
+
+
+def test_normalized_never_flips_the_gradient():
+    # x / sg|x| at x = -2: value -1, gradient 1/|x| = +0.5 (the authors' x / sg(x) would give -0.5)
+    value, grad = jax.value_and_grad(L.normalized)(jnp.array(-2.0))
+    A(value, -1.0, rtol=1e-6)
+    A(grad, 0.5, rtol=1e-6)
+    assert grad > 0
+
+
+def test_balance_losses_value_and_gradient_signs():
+    # a = 2, b = -4, c = 3: value 1 + 3*(-1) = -2; d/da = 1/2, d/db = 3/4 (both positive: minimising still lowers b)
+    value, grads = jax.value_and_grad(L.balance_losses, argnums=(0, 1))(jnp.array(2.0), jnp.array(-4.0), 3.0)
+    A(value, -2.0, rtol=1e-6)
+    A(grads, (0.5, 0.75), rtol=1e-6)
+
+
+def test_mix_losses():
+    # lam = 0.25, L_MC = 4, L_TD = 2: value 0.75 + 0.25 = 1; d/dL_MC = 0.75/4, d/dL_TD = 0.25/2
+    value, grads = jax.value_and_grad(L.mix_losses, argnums=(0, 1))(jnp.array(4.0), jnp.array(2.0), 0.25)
+    A(value, 1.0, rtol=1e-6)
+    A(grads, (0.1875, 0.125), rtol=1e-6)
+
+
+def test_td3bc_actor_loss():
+    # q = [2, 4]: lmbda = 2.5 / mean|q| = 2.5/3; -lmbda * 3 = -2.5; MSE([[0],[0]], [[1],[0]]) = 0.5 -> -2.0
+    loss = L.td3bc_actor_loss(jnp.array([2.0, 4.0]), jnp.zeros((2, 1)), jnp.array([[1.0], [0.0]]), 2.5)
+    A(loss, -2.0, rtol=1e-6)
+    # lmbda is a constant: d loss / d q = -lmbda / B = -(2.5/3)/2
+    grad = jax.grad(lambda q: L.td3bc_actor_loss(q, jnp.zeros((2, 1)), jnp.zeros((2, 1)), 2.5))(jnp.array([2.0, 4.0]))
+    A(grad, [-2.5 / 6, -2.5 / 6], rtol=1e-6)
+
+
+def test_sac_actor_and_temperature_losses():
+    # min_i Q = [1, 2]; mean(2*0.5 - 1, 2*(-1) - 2) = mean(0, -4) = -2
+    A(L.sac_actor_loss(jnp.array([[1.0, 5.0], [3.0, 2.0]]), jnp.array([0.5, -1.0]), 2.0), -2.0)
+    # -mean(0.5 * ([1, 2] - 1)) = -0.25; d/dlog_alpha = -mean([0, 1]) = -0.5
+    value, grad = jax.value_and_grad(L.temperature_loss)(jnp.array(0.5), jnp.array([1.0, 2.0]), -1.0)
+    A(value, -0.25)
+    A(grad, -0.5)
+
+
+@pytest.mark.parametrize(
+    "grads, expected",
+    [
+        ([[[1.0, 0.0]], [[0.0, 2.0]]], 0.0),  # orthogonal: cos 0
+        ([[[1.0, 0.0]], [[3.0, 0.0]]], 2.0),  # aligned, N = 2: cos(1,2) + cos(2,1) = 2, / (N - 1) = 2
+        ([[[1.0, 0.0]], [[-1.0, 0.0]]], -2.0),  # opposite: (-1 - 1) / 1
+        ([[[1.0, 0.0]], [[2.0, 0.0]], [[5.0, 0.0]]], 3.0),  # N = 3 aligned: 6 off-diagonal ones / 2
+    ],
+)
+def test_edac_diversity_loss(grads, expected):
+    A(L.edac_diversity_loss(jnp.array(grads)), expected, rtol=1e-6)
+
+
+def test_cql_uniform_penalty():
+    # logsumexp(0, ln 3) = ln 4; q_data = ln 4 - 1 -> penalty 1 (one critic, one state)
+    q_u = jnp.array([[[0.0, np.log(3.0)]]])
+    A(L.cql_uniform_penalty(q_u, jnp.array([[np.log(4.0) - 1.0]])), 1.0, rtol=1e-6)
+    # temperature 2: 2 * logsumexp(0, ln 9 / 2) = 2 ln(1 + 3) = 2 ln 4; q_data = 0
+    q_u = jnp.array([[[0.0, np.log(9.0)]]])
+    A(L.cql_uniform_penalty(q_u, jnp.zeros((1, 1)), temperature=2.0), 2 * np.log(4.0), rtol=1e-6)
+    # two critics sum
+    A(L.cql_uniform_penalty(jnp.zeros((2, 1, 1)), jnp.zeros((2, 1))), 0.0, atol=1e-7)
+
+
+def test_cql_importance_penalty():
+    # A = 1, all Q and log-probs 0: logsumexp(-ln 0.5, 0, 0) = ln(2 + 1 + 1) = ln 4
+    z3, z2 = jnp.zeros((1, 1, 1)), jnp.zeros((1, 1))
+    A(L.cql_importance_penalty(z3, z3, z2, z3, z2, z2, act_dim=1), np.log(4.0), rtol=1e-6)
+    # A = 2: -2 ln 0.5 = ln 4 -> ln(4 + 1 + 1) = ln 6
+    A(L.cql_importance_penalty(z3, z3, z2, z3, z2, z2, act_dim=2), np.log(6.0), rtol=1e-6)
