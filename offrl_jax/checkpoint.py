@@ -1,0 +1,53 @@
+"""Atomic files and checkpoints (flax.serialization msgpack): write to a temporary file in the same directory, fsync,
+then `os.replace`, so a reader (or a resumed run) only ever sees a complete old file or a complete new one.
+
+A checkpoint holds every seed's agent state (parameters, target parameters, optimiser states, temperature, soft
+returns), the global update counter, the training seconds so far and the evaluation history.  No RNG state needs
+saving: every key is a pure function of (seed, update) (see `offrl_jax.driver`).
+"""
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from flax import serialization
+
+
+def atomic_write_bytes(path: str | Path, data: bytes) -> None:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def atomic_write_text(path: str | Path, text: str) -> None:
+    atomic_write_bytes(path, text.encode())
+
+
+def save_checkpoint(path: str | Path, states: Any, update: int, seconds: float, history: list[dict]) -> None:
+    payload = {
+        "states": serialization.to_state_dict(states),
+        "update": update,
+        "seconds": seconds,
+        "history": json.dumps(history),
+    }
+    atomic_write_bytes(path, serialization.msgpack_serialize(payload))
+
+
+def load_checkpoint(path: str | Path, template_states: Any) -> tuple[Any, int, float, list[dict]]:
+    """(states, update, seconds, history); `template_states` gives the pytree structure (e.g. a fresh init)."""
+    payload = serialization.msgpack_restore(Path(path).read_bytes())
+    states = serialization.from_state_dict(template_states, payload["states"])
+    return states, int(payload["update"]), float(payload["seconds"]), json.loads(payload["history"])

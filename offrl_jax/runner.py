@@ -1,0 +1,248 @@
+"""Run a study: several variants (algorithm + hyper-parameters) on one dataset, each with S vmapped seeds, evaluated
+between scan chunks, with atomic results, checkpoints every N updates, `resume`, and a clean stop on divergence.
+
+Output directory:
+    config.json      the study (enough to resume it)
+    curves.csv       variant, seed, phase, update, seconds, score, every logged metric
+    summary.json     one object per variant (see `summarize`)
+    curves.png       mean and 95 % CI per variant against updates, pre-training end marked
+    checkpoints/     <variant>.msgpack, the last complete chunk of every variant
+"""
+from __future__ import annotations
+
+import csv
+import dataclasses
+import io
+import json
+import math
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import jax
+import numpy as np
+from tqdm.auto import tqdm
+
+from offrl_jax.algos import make_algorithm, make_config
+from offrl_jax.checkpoint import atomic_write_bytes, atomic_write_text, load_checkpoint, save_checkpoint
+from offrl_jax.data.dataset import Dataset
+from offrl_jax.driver import Driver, device_data
+from offrl_jax.evaluate import evaluate_normalized, make_policy
+
+
+class Diverged(RuntimeError):
+    """Every seed of a variant produced a non-finite loss or parameter."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Variant:
+    label: str  # unique, used in files: "pretrained", "scratch", "lambda=0.1", ...
+    algo: str
+    overrides: tuple[tuple[str, Any], ...] = ()  # config overrides as (name, value) pairs
+
+    @staticmethod
+    def of(label: str, algo: str, **overrides: Any) -> "Variant":
+        return Variant(label, algo, tuple(sorted(overrides.items())))
+
+
+@dataclasses.dataclass(frozen=True)
+class Study:
+    name: str
+    dataset: str  # a known name ("hopper-medium") or a path
+    env: str
+    variants: tuple[Variant, ...]
+    seeds: tuple[int, ...] = (0, 1, 2)
+    updates: int = 100_000
+    eval_every: int = 5_000
+    eval_episodes: int = 10
+    batch_size: int = 256
+    checkpoint_every: int = 0  # 0 = at every evaluation
+    transitions: int | None = None  # cap the dataset size (quick runs, tests)
+    reference: str | None = None  # label of the from-scratch variant whose final score is the asymptote
+
+    def to_json(self) -> str:
+        return json.dumps(dataclasses.asdict(self), indent=2)
+
+    @staticmethod
+    def from_json(text: str) -> "Study":
+        raw = json.loads(text)
+        raw["variants"] = tuple(Variant(v["label"], v["algo"], tuple(tuple(o) for o in v["overrides"]))
+                                for v in raw["variants"])
+        raw["seeds"] = tuple(raw["seeds"])
+        return Study(**raw)
+
+
+def run_study(study: Study, out_dir: Path, dataset: Dataset, resume: bool = False, progress: bool = True) -> list[dict]:
+    """Run (or resume) every variant; write results as it goes; return the summary."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    if not resume:
+        atomic_write_text(out_dir / "config.json", study.to_json())
+    total = len(study.variants) * study.updates
+    bar = tqdm(total=total, disable=not progress, unit="upd", dynamic_ncols=True, file=sys.stderr)
+    history: list[dict] = []
+    pretrain_ends: dict[str, int] = {}
+    for variant in study.variants:
+        rows, pretrain_ends[variant.label] = _run_variant(study, variant, dataset, out_dir, resume, bar, history)
+        history += rows
+        write_curves(out_dir / "curves.csv", history)
+    bar.close()
+    summary = summarize(study, history, pretrain_ends)
+    atomic_write_text(out_dir / "summary.json", json.dumps(summary, indent=2))
+    plot_curves(out_dir / "curves.png", study, history, pretrain_ends)
+    return summary
+
+
+def _run_variant(study: Study, variant: Variant, ds: Dataset, out_dir: Path, resume: bool, bar,
+                 earlier_rows: list[dict]) -> tuple[list, int]:
+    config = make_config(variant.algo, study.env, study.dataset, **dict(variant.overrides))
+    algo = make_algorithm(config, ds.obs_dim, ds.act_dim, len(ds))
+    data, (obs_mean, obs_std) = device_data(ds, config.gamma)
+    driver = Driver(algo, data, study.seeds, study.batch_size)
+    policy = make_policy(algo.act, obs_mean, obs_std)
+    phases = algo.phases(study.updates)
+    pretrain_end = sum(p.steps for p in phases if p.name != "offline_rl")
+    ckpt_path = out_dir / "checkpoints" / f"{variant.label}.msgpack"
+    states, start, seconds, rows = None, 0, 0.0, []
+    if resume and ckpt_path.exists():
+        states, start, seconds, rows = load_checkpoint(ckpt_path, driver.init())
+    bar.update(start)
+    if start >= study.updates:
+        return rows, pretrain_end
+    every = study.checkpoint_every or study.eval_every
+    last_saved = start
+    alive = np.ones(len(study.seeds), bool)
+    for chunk in driver.run(phases, study.eval_every, states, start, seconds):
+        finite = np.asarray(chunk.metrics.pop("finite"), bool)
+        if not finite.all():
+            newly = [s for s, ok, a in zip(study.seeds, finite, alive) if a and not ok]
+            alive &= finite
+            if newly:
+                tqdm.write(f"diverged: {variant.algo} ({variant.label}), phase {chunk.phase}, seed(s) "
+                           f"{', '.join(map(str, newly))}, by update {chunk.update}", file=sys.stderr)
+            if not alive.any():
+                _write_curves(out_dir / "curves.csv", rows)
+                raise Diverged(f"{variant.algo} ({variant.label}) diverged in phase {chunk.phase} for every seed by "
+                               f"update {chunk.update}; last good checkpoint: update {last_saved} in {ckpt_path}")
+        tic = time.perf_counter()
+        scores = evaluate_normalized(policy, chunk.states, study.env, study.eval_episodes).mean(axis=1)
+        scores[~alive] = np.nan
+        rows += _rows(variant, study.seeds, chunk, scores)
+        bar.update(chunk.update - start)
+        start = chunk.update
+        mean_score = float(np.nanmean(scores)) if alive.any() else float("nan")
+        bar.set_postfix_str(f"{variant.label} | {chunk.phase} | {chunk.updates_per_s:.0f} upd/s | score "
+                            f"{mean_score:.1f} | eval {time.perf_counter() - tic:.1f}s")
+        if alive.all() and (chunk.update - last_saved >= every or chunk.update == study.updates):
+            save_checkpoint(ckpt_path, chunk.states, chunk.update, chunk.seconds, rows)
+            last_saved = chunk.update
+        write_curves(out_dir / "curves.csv", earlier_rows + rows)
+    return rows, pretrain_end
+
+
+def _rows(variant: Variant, seeds: tuple[int, ...], chunk, scores: np.ndarray) -> list[dict]:
+    return [
+        {"variant": variant.label, "algo": variant.algo, "seed": seed, "phase": chunk.phase, "update": chunk.update,
+         "seconds": round(chunk.seconds, 3), "score": float(scores[i])}
+        | {name: float(np.asarray(value)[i]) for name, value in sorted(chunk.metrics.items())}
+        for i, seed in enumerate(seeds)
+    ]
+
+
+def write_curves(path: Path, rows: list[dict]) -> None:
+    columns = list(dict.fromkeys(k for row in rows for k in row))
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, fieldnames=columns, restval="")
+    writer.writeheader()
+    writer.writerows(rows)
+    atomic_write_text(path, buffer.getvalue())
+
+
+T95 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306, 9: 2.262, 10: 2.228}
+
+
+def ci95(values: np.ndarray) -> float:
+    """Half-width of the 95 % t-interval of the mean (0 for a single value)."""
+    values = values[np.isfinite(values)]
+    if len(values) < 2:
+        return 0.0
+    return float(T95.get(len(values) - 1, 1.96) * values.std(ddof=1) / math.sqrt(len(values)))
+
+
+def score_matrix(rows: list[dict], label: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(updates (E,), seconds (E,), scores (S, E)) of one variant."""
+    mine = [r for r in rows if r["variant"] == label]
+    updates = np.array(sorted({r["update"] for r in mine}))
+    seeds = sorted({r["seed"] for r in mine})
+    scores = np.full((len(seeds), len(updates)), np.nan)
+    seconds = np.zeros(len(updates))
+    for r in mine:
+        j = int(np.searchsorted(updates, r["update"]))
+        scores[seeds.index(r["seed"]), j] = r["score"]
+        seconds[j] = r["seconds"]
+    return updates, seconds, scores
+
+
+def summarize(study: Study, rows: list[dict], pretrain_ends: dict[str, int]) -> list[dict]:
+    """Per variant: final score (mean of the last 10 % of evaluations per seed; mean and 95 % CI over seeds), the
+    from-scratch asymptote, and the first evaluation at which the seed-mean reaches 90 % of it."""
+    finals = {}
+    for v in study.variants:
+        updates, _, scores = score_matrix(rows, v.label)
+        last = max(1, int(round(0.1 * len(updates))))
+        finals[v.label] = np.nanmean(scores[:, -last:], axis=1) if len(updates) else np.array([np.nan])
+    reference = study.reference or study.variants[-1].label
+    asymptote = float(np.nanmean(finals[reference])) if reference in finals else float("nan")
+    summary = []
+    for v in study.variants:
+        updates, seconds, scores = score_matrix(rows, v.label)
+        reached = np.flatnonzero(np.nanmean(scores, axis=0) >= 0.9 * asymptote) if len(updates) else []
+        config = make_config(v.algo, study.env, study.dataset, **dict(v.overrides))
+        summary.append({
+            "variant": v.label, "env": study.env, "dataset": study.dataset, "algo": v.algo,
+            "pretrain": getattr(config, "pretrain", "none"), "seeds": list(study.seeds), "updates": study.updates,
+            "final_score_mean": float(np.nanmean(finals[v.label])), "final_score_ci95": ci95(finals[v.label]),
+            "asymptote": asymptote,
+            "updates_to_90pct": int(updates[reached[0]]) if len(reached) else None,
+            "seconds_to_90pct": float(seconds[reached[0]]) if len(reached) else None,
+            "pretrain_updates": pretrain_ends.get(v.label, 0),
+            "overrides": dict(v.overrides),
+        })
+    return summary
+
+
+def plot_curves(path: Path, study: Study, rows: list[dict], pretrain_ends: dict[str, int]) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for i, v in enumerate(study.variants):
+        updates, _, scores = score_matrix(rows, v.label)
+        if not len(updates):
+            continue
+        mean = np.nanmean(scores, axis=0)
+        half = np.array([ci95(scores[:, j]) for j in range(len(updates))])
+        line, = ax.plot(updates, mean, label=v.label, color=f"C{i}")
+        ax.fill_between(updates, mean - half, mean + half, alpha=0.2, color=f"C{i}")
+        if pretrain_ends.get(v.label):
+            ax.axvline(pretrain_ends[v.label], color=line.get_color(), ls=":", lw=1)
+    ax.set_xlabel("updates (pre-training included; dotted: end of pre-training)")
+    ax.set_ylabel("D4RL-normalised score")
+    ax.set_title(f"{study.name}: {study.dataset}, {len(study.seeds)} seeds, mean and 95% CI")
+    ax.grid(alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=120)
+    plt.close(fig)
+    atomic_write_bytes(path, buffer.getvalue())
+
+
+def print_table(summary: list[dict]) -> None:
+    print(f"{'variant':<24} {'final score':>16} {'updates to 90%':>15} {'seconds to 90%':>15}")
+    for s in summary:
+        u = "never" if s["updates_to_90pct"] is None else f"{s['updates_to_90pct']:,}"
+        t = "never" if s["seconds_to_90pct"] is None else f"{s['seconds_to_90pct']:.0f}"
+        print(f"{s['variant']:<24} {s['final_score_mean']:>8.1f} ± {s['final_score_ci95']:<5.1f} {u:>15} {t:>15}")
