@@ -95,13 +95,12 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
     args = parser.parse_args(argv)
     out = None
     try:
+        built = None if args.resume is not None else build(args)  # validates every hyper-parameter first
         out = output_dir(args, parser.prog.split(".")[-1])
         if args.resume is not None:
             subs = sorted(out.glob("*/config.json"))
             built = [Study.from_json(p.read_text()) for p in subs] if subs else Study.from_json(
                 (out / "config.json").read_text())
-        else:
-            built = build(args)
         studies = built if isinstance(built, list) else [built]
         if isinstance(built, list) and args.resume is None:
             out.mkdir(parents=True, exist_ok=True)

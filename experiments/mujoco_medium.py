@@ -41,6 +41,9 @@ def parser() -> argparse.ArgumentParser:
     g.add_argument("--alpha", type=float, default=None, help="TD3+BC alpha (default: per env)")
     g.add_argument("--num-critics", type=int, default=None, help="EDAC/SAC-N ensemble size (default: per env)")
     g.add_argument("--eta", type=float, default=None, help="EDAC diversity weight")
+    g.add_argument("--hidden", type=positive_int, nargs="+", default=None, help="hidden layer widths (default per algo)")
+    g.add_argument("--actor-lr", type=float, default=None)
+    g.add_argument("--critic-lr", type=float, default=None)
     g.add_argument("--preset", choices=("paper",), default=None,
                    help="paper: 3 envs x {td3bc, edac} x 3 seeds x 1M updates, each in its own sub-directory")
     run_args(p, updates=100_000, eval_every=5_000)
@@ -50,7 +53,8 @@ def parser() -> argparse.ArgumentParser:
 def overrides(args) -> dict:
     return {"lam": args.lam, "lambda_mode": args.lambda_mode, "actor_layer_norm": args.actor_ln,
             "critic_layer_norm": args.critic_ln, "alpha": args.alpha, "num_critics": args.num_critics,
-            "eta": args.eta, "pretrain_updates": args.pretrain_updates}
+            "eta": args.eta, "pretrain_updates": args.pretrain_updates, "actor_lr": args.actor_lr,
+            "critic_lr": args.critic_lr, "hidden": tuple(args.hidden) if args.hidden else None}
 
 
 def build(args) -> Study | list[Study]:

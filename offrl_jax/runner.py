@@ -28,6 +28,7 @@ from offrl_jax.algos import make_algorithm, make_config
 from offrl_jax.checkpoint import atomic_write_bytes, atomic_write_text, load_checkpoint, save_checkpoint
 from offrl_jax.data.dataset import Dataset
 from offrl_jax.driver import Driver, device_data
+from offrl_jax.envs import get_env_spec
 from offrl_jax.evaluate import evaluate_normalized, make_policy
 
 
@@ -60,6 +61,21 @@ class Study:
     checkpoint_every: int = 0  # 0 = at every evaluation
     transitions: int | None = None  # cap the dataset size (quick runs, tests)
     reference: str | None = None  # label of the from-scratch variant whose final score is the asymptote
+
+    def __post_init__(self):
+        for name in ("updates", "eval_every", "eval_episodes", "batch_size"):
+            if getattr(self, name) <= 0:
+                raise ValueError(f"Study.{name} = {getattr(self, name)} must be positive")
+        if not self.seeds:
+            raise ValueError("Study.seeds must not be empty")
+        if self.checkpoint_every < 0:
+            raise ValueError(f"Study.checkpoint_every = {self.checkpoint_every} must be >= 0")
+        labels = [v.label for v in self.variants]
+        if not labels or len(set(labels)) != len(labels):
+            raise ValueError(f"Study.variants need unique labels, got {labels}")
+        get_env_spec(self.env)
+        for v in self.variants:  # every variant's hyper-parameters are checked before anything runs or is written
+            make_config(v.algo, self.env, self.dataset, **dict(v.overrides))
 
     def to_json(self) -> str:
         return json.dumps(dataclasses.asdict(self), indent=2)
@@ -121,7 +137,7 @@ def _run_variant(study: Study, variant: Variant, ds: Dataset, out_dir: Path, res
                 tqdm.write(f"diverged: {variant.algo} ({variant.label}), phase {chunk.phase}, seed(s) "
                            f"{', '.join(map(str, newly))}, by update {chunk.update}", file=sys.stderr)
             if not alive.any():
-                _write_curves(out_dir / "curves.csv", rows)
+                write_curves(out_dir / "curves.csv", earlier_rows + rows)
                 raise Diverged(f"{variant.algo} ({variant.label}) diverged in phase {chunk.phase} for every seed by "
                                f"update {chunk.update}; last good checkpoint: update {last_saved} in {ckpt_path}")
         tic = time.perf_counter()

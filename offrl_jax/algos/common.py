@@ -87,6 +87,26 @@ def split_budget(total: int, pretrain: int) -> tuple[int, int]:
     return pretrain, total - pretrain
 
 
+def validate_common(cfg) -> None:
+    """Reject invalid hyper-parameters with one line naming the field (shared by every config)."""
+    checks = [
+        ("gamma", 0.0 < cfg.gamma <= 1.0, "must be in (0, 1]"),
+        ("tau", 0.0 < cfg.tau <= 1.0, "must be in (0, 1]"),
+        ("lam", 0.0 <= cfg.lam <= 1.0, "must be in [0, 1]"),
+        ("actor_lr", cfg.actor_lr > 0, "must be positive"),
+        ("critic_lr", cfg.critic_lr > 0, "must be positive"),
+        ("pretrain_updates", cfg.pretrain_updates >= 0, "must be >= 0"),
+        ("hidden", len(cfg.hidden) > 0 and all(h > 0 for h in cfg.hidden), "must be positive layer widths"),
+        ("pretrain", cfg.pretrain in ("none", "actor", "critic", "actor+critic"),
+         "must be one of none, actor, critic, actor+critic"),
+        ("lambda_mode", cfg.lambda_mode in ("loss", "target"), "must be 'loss' or 'target'"),
+        ("num_critics", cfg.num_critics >= 1, "must be >= 1"),
+    ]
+    for name, ok, message in checks:
+        if not ok:
+            raise ValueError(f"{type(cfg).__name__}.{name} = {getattr(cfg, name)!r} {message}")
+
+
 def uniform_actions(key: jax.Array, batch: int, num: int, act_dim: int) -> jax.Array:
     """(B, M, A) actions uniform in [-1, 1]."""
     return jax.random.uniform(key, (batch, num, act_dim), minval=-1.0, maxval=1.0)

@@ -32,6 +32,7 @@ from offrl_jax.algos.common import (
     single,
     split_budget,
     uniform_actions,
+    validate_common,
 )
 from offrl_jax.data.returns import soft_returns_to_go
 from offrl_jax.nets import CriticEnsemble, TanhGaussianActor, sample_tanh_gaussian, tanh_gaussian_log_prob
@@ -61,6 +62,15 @@ class EDACConfig:
     lam: float = 0.0
     lambda_mode: Literal["loss", "target"] = "loss"
     entropy_batch: int = 16_384  # rows per batch when computing the per-state entropies for the soft returns
+
+    def __post_init__(self):
+        validate_common(self)
+        if self.eta > 0 and self.num_critics < 2:
+            raise ValueError(f"EDACConfig.num_critics = {self.num_critics} must be >= 2 for EDAC (eta > 0)")
+        if not 0.0 <= self.actor_pretrain_fraction <= 1.0:
+            raise ValueError(f"EDACConfig.actor_pretrain_fraction = {self.actor_pretrain_fraction} must be in [0, 1]")
+        if self.alpha_lr <= 0 or self.init_alpha <= 0:
+            raise ValueError("EDACConfig.alpha_lr and init_alpha must be positive")
 
 
 @struct.dataclass

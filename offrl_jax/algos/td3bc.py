@@ -32,6 +32,7 @@ from offrl_jax.algos.common import (
     single,
     split_budget,
     uniform_actions,
+    validate_common,
 )
 from offrl_jax.nets import CriticEnsemble, DeterministicActor
 
@@ -63,6 +64,13 @@ class TD3BCConfig:
     lambda_mode: Literal["loss", "target"] = "loss"  # authors' normalised-loss mixing, or eq. 5 target mixing
     target: Literal["td", "max_mc"] = "td"  # offline-RL critic target; max_mc = Q-Transformer's max(MC, TD)
     bc_only: bool = False  # the BC baseline: actor pre-training for the whole budget
+
+    def __post_init__(self):
+        validate_common(self)
+        if self.policy_delay < 1:
+            raise ValueError(f"TD3BCConfig.policy_delay = {self.policy_delay} must be >= 1")
+        if self.target not in ("td", "max_mc"):
+            raise ValueError(f"TD3BCConfig.target = {self.target!r} must be 'td' or 'max_mc'")
 
 
 @struct.dataclass

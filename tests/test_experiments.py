@@ -1,0 +1,102 @@
+"""The experiment CLI end to end on a tiny dataset: bad input, kill-and-resume, divergence, determinism."""
+import csv
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import h5py
+import pytest
+
+from tests.conftest import synthetic_dataset
+
+ROOT = Path(__file__).resolve().parents[1]
+TINY = ["--updates", "400", "--eval-every", "100", "--pretrain-updates", "200", "--eval-episodes", "1",
+        "--seeds", "2", "--hidden", "32", "32", "--batch-size", "32", "--no-progress"]
+
+
+@pytest.fixture(scope="module")
+def tiny_hdf5(tmp_path_factory) -> Path:
+    ds = synthetic_dataset(3000, episode_len=100)
+    path = tmp_path_factory.mktemp("data") / "hopper-tiny.hdf5"
+    with h5py.File(path, "w") as f:
+        for key in ("observations", "actions", "rewards", "next_observations", "terminals", "timeouts"):
+            f[key] = getattr(ds, key)
+    return path
+
+
+def cli(*args, check=False, **kw):
+    return subprocess.run([sys.executable, "-m", "experiments.mujoco_medium", *map(str, args)], cwd=ROOT,
+                          capture_output=True, text=True, check=check, **kw)
+
+
+def curves_without_time(path: Path) -> list[dict]:
+    with open(path) as f:
+        return [{k: v for k, v in row.items() if k != "seconds"} for row in csv.DictReader(f)]
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--env", "cartpole"], "invalid choice"),
+    (["--algo", "dqn"], "invalid choice"),
+    (["--updates", "0"], "positive integer"),
+    (["--lam", "1.5"], "lam = 1.5 must be in [0, 1]"),
+    (["--batch-size", "-4"], "positive integer"),
+    (["--algo", "edac", "--num-critics", "1"], "num_critics = 1 must be >= 2"),
+    (["--dataset-path", "/nonexistent/file.hdf5"], "/nonexistent/file.hdf5"),
+    (["--resume", "/nonexistent/run"], "nothing to resume"),
+])
+def test_bad_input_is_one_line_and_writes_nothing(tmp_path, args, message):
+    out = tmp_path / "out"
+    result = cli(*args, "--out", out, timeout=120)
+    assert result.returncode != 0
+    lines = result.stderr.strip().splitlines()
+    assert lines[-1].startswith("error:") and message in lines[-1], result.stderr
+    assert "Traceback" not in result.stderr
+    assert not out.exists()
+
+
+def test_existing_output_is_never_overwritten(tmp_path, tiny_hdf5):
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "keep.txt").write_text("precious")
+    result = cli("--dataset-path", tiny_hdf5, "--out", out, *TINY, timeout=120)
+    assert result.returncode == 2 and "exists and is not empty" in result.stderr
+    assert (out / "keep.txt").read_text() == "precious"
+
+
+def test_kill_and_resume_equals_uninterrupted_run(tmp_path, tiny_hdf5):
+    full, killed = tmp_path / "full", tmp_path / "killed"
+    cli("--dataset-path", tiny_hdf5, "--out", full, *TINY, check=True, timeout=600)
+
+    proc = subprocess.Popen([sys.executable, "-m", "experiments.mujoco_medium", "--dataset-path", str(tiny_hdf5),
+                             "--out", str(killed), *TINY], cwd=ROOT, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    checkpoint = killed / "checkpoints" / "pretrained.msgpack"
+    deadline = time.time() + 300
+    while not checkpoint.exists() and time.time() < deadline and proc.poll() is None:
+        time.sleep(0.05)
+    os.kill(proc.pid, signal.SIGKILL)  # in the middle of the pre-training phase (first checkpoint: update 100)
+    proc.wait()
+    assert checkpoint.exists()
+    assert not (killed / "summary.json").exists()
+
+    result = cli("--resume", killed, "--no-progress", timeout=600)
+    assert result.returncode == 0, result.stderr
+    assert curves_without_time(killed / "curves.csv") == curves_without_time(full / "curves.csv")
+    assert (killed / "summary.json").exists() and (killed / "curves.png").exists()
+
+
+def test_divergence_stops_cleanly_and_keeps_checkpoint(tmp_path, tiny_hdf5):
+    out = tmp_path / "nan"
+    # BC pre-training is fine; the exploding critic learning rate blows up the offline-RL phase
+    result = cli("--dataset-path", tiny_hdf5, "--out", out, "--pretrain", "actor", "--critic-lr", "1e12", *TINY,
+                 timeout=600)
+    assert result.returncode == 3, result.stderr
+    last = result.stderr.strip().splitlines()[-1]
+    assert last.startswith("error:") and "td3bc" in last and "diverged in phase offline_rl" in last
+    assert "Traceback" not in result.stderr
+    assert "seed(s) 0, 1" in result.stderr
+    assert (out / "checkpoints" / "actor-only.msgpack").exists()
+    assert (out / "curves.csv").exists()
