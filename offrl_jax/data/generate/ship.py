@@ -40,7 +40,7 @@ def select_checkpoint(run_dir: str | Path, level: str, env: str) -> dict[str, An
 
 
 def ship(run_dir: str | Path, level: str, step: int | None = None, episodes: int = 20, seed: int = 123,
-         dest: Path = POLICY_DIR) -> dict[str, Any]:
+         dest: Path = POLICY_DIR, note: str | None = None) -> dict[str, Any]:
     """Copy the chosen checkpoint of `run_dir` to `dest/<env>-<level>.msgpack` and record it in policies.json."""
     run_dir = Path(run_dir)
     run = json.loads((run_dir / "run.json").read_text())
@@ -71,7 +71,8 @@ def ship(run_dir: str | Path, level: str, step: int | None = None, episodes: int
         "stochastic_normalized_score": round(float(normalized_score(env, sto.mean())), 2),
         "selection": ("closest train-eval score to D4RL medium target "
                       f"{MEDIUM_TARGET_SCORE[env]}" if level == "medium" and step is None
-                      else "best train-eval return" if step is None else "chosen by hand"),
+                      else "best train-eval return" if step is None else "chosen by hand")
+        + (f"; {note}" if note else ""),
         "size_bytes": (dest / f"{name}.msgpack").stat().st_size,
     }
     index_path = dest / POLICY_INDEX.name
@@ -87,6 +88,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--level", required=True, choices=["medium", "expert"])
     p.add_argument("--step", type=int, default=None, help="ship this checkpoint instead of the automatic choice")
     p.add_argument("--episodes", type=int, default=20, help="verification episodes")
+    p.add_argument("--note", default=None, help="why this checkpoint (recorded in policies.json)")
     p.add_argument("--list", action="store_true", help="only print the run's evaluations and the automatic choice")
     a = p.parse_args(argv)
     if a.list:
@@ -96,7 +98,7 @@ def main(argv: list[str] | None = None) -> None:
                   f"returns {np.round(e['eval_returns']).astype(int).tolist()}")
         print("choice:", select_checkpoint(a.run, a.level, run["env"])["step"])
         return
-    print(json.dumps(ship(a.run, a.level, a.step, a.episodes), indent=1))
+    print(json.dumps(ship(a.run, a.level, a.step, a.episodes, note=a.note), indent=1))
 
 
 if __name__ == "__main__":
