@@ -13,6 +13,7 @@ from typing import Any, Callable, Iterator
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
 
 from offrl_jax.algos.common import Phase
 from offrl_jax.data.dataset import Dataset, normalize_obs
@@ -77,15 +78,37 @@ class Chunk:
     updates_per_s: float
 
 
+def seed_sharding(num_seeds: int, devices=None) -> tuple[NamedSharding, NamedSharding]:
+    """(seed-axis sharding, replicated sharding) over a 1-D mesh of the devices.
+
+    The seed axis is split over as many devices as divide it (all of them when S is a multiple of the device count;
+    one device otherwise), so 8 GPUs run 8x the seeds in the same time.  On one device this is a no-op.  Multi-host:
+    call `jax.distributed.initialize()` first; `jax.devices()` then spans every host and the same code runs.
+    """
+    devices = list(jax.devices() if devices is None else devices)
+    while num_seeds % len(devices):
+        devices = devices[:-1]
+    mesh = Mesh(np.array(devices), ("seeds",))
+    return NamedSharding(mesh, P("seeds")), NamedSharding(mesh, P())
+
+
 class Driver:
-    def __init__(self, algo, data: dict[str, jax.Array], seeds: tuple[int, ...], batch_size: int = 256):
-        self.algo, self.data, self.seeds, self.batch_size = algo, data, tuple(seeds), batch_size
+    def __init__(self, algo, data: dict[str, jax.Array], seeds: tuple[int, ...], batch_size: int = 256,
+                 devices=None):
+        self.algo, self.seeds, self.batch_size = algo, tuple(seeds), batch_size
+        self.seed_axis, self.replicated = seed_sharding(len(self.seeds), devices)
+        self.data = jax.device_put(data, self.replicated)  # one copy per device, shared by its seeds
         self._chunk_fns: dict[tuple[str, int], Callable] = {}
 
     def init(self) -> Any:
         states = jax.vmap(self.algo.init)(seed_keys(self.seeds, INIT, 0))
         # Targets start equal to params; give every leaf its own buffer so the chunk function can donate them.
-        return jax.tree.map(lambda x: jnp.array(x, copy=True), states)
+        states = jax.tree.map(lambda x: jnp.array(x, copy=True), states)
+        return self.shard(states)
+
+    def shard(self, states: Any) -> Any:
+        """Place a seed-batched pytree with its seed axis split over the mesh."""
+        return jax.device_put(states, self.seed_axis)
 
     def _chunk_fn(self, phase: Phase, num_calls: int) -> Callable:
         key = (phase.name, num_calls)
@@ -99,7 +122,7 @@ class Driver:
 
         `states`/`start_update`/`seconds` resume a run from a checkpoint taken at a chunk boundary.
         """
-        states = self.init() if states is None else states
+        states = self.init() if states is None else self.shard(states)
         phase_start = 0
         for index, phase in enumerate(phases):
             phase_end = phase_start + phase.steps
@@ -108,13 +131,15 @@ class Driver:
                 continue
             if phase.on_start is not None and start_update == phase_start:
                 hook = jax.jit(jax.vmap(phase.on_start, in_axes=(0, None, 0)))
-                states = hook(states, self.data, seed_keys(self.seeds, PHASE_START, index))
+                states = hook(states, self.data, jax.device_put(seed_keys(self.seeds, PHASE_START, index),
+                                                                self.seed_axis))
             update = max(start_update, phase_start)
             while update < phase_end:
                 n = min(chunk_updates - update % chunk_updates, phase_end - update)  # align chunks globally
                 calls = max(1, n // phase.updates_per_call)
                 tic = time.perf_counter()
-                states, metrics = self._chunk_fn(phase, calls)(states, self.data, seed_keys(self.seeds, CHUNK, update))
+                keys = jax.device_put(seed_keys(self.seeds, CHUNK, update), self.seed_axis)
+                states, metrics = self._chunk_fn(phase, calls)(states, self.data, keys)
                 metrics = jax.tree.map(np.asarray, metrics)
                 elapsed = time.perf_counter() - tic
                 seconds += elapsed
