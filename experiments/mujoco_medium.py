@@ -24,11 +24,12 @@ PRETRAIN = ("actor+critic", "actor", "critic", "none")
 LABELS = {"actor+critic": "pretrained", "none": "scratch", "actor": "actor-only", "critic": "critic-only"}
 
 
-def parser() -> argparse.ArgumentParser:
-    p = OneLineParser(prog="experiments.mujoco_medium", description=__doc__,
-                      formatter_class=argparse.RawDescriptionHelpFormatter)
+def parser(prog: str = "experiments.mujoco_medium", doc: str = __doc__, updates: int = 100_000,
+           eval_every: int = 5_000, env: str = "hopper") -> argparse.ArgumentParser:
+    """The flags every MuJoCo study shares; studies pass their own defaults."""
+    p = OneLineParser(prog=prog, description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
     g = p.add_argument_group("what to compare")
-    g.add_argument("--env", choices=ENVS, default="hopper")
+    g.add_argument("--env", choices=ENVS, default=env)
     g.add_argument("--level", choices=LEVELS, default="medium", help="dataset level (default %(default)s)")
     g.add_argument("--algo", choices=tuple(ALGOS), default="td3bc")
     g.add_argument("--pretrain", nargs="+", choices=PRETRAIN, default=["actor+critic", "none"],
@@ -46,7 +47,7 @@ def parser() -> argparse.ArgumentParser:
     g.add_argument("--critic-lr", type=float, default=None)
     g.add_argument("--preset", choices=("paper",), default=None,
                    help="paper: 3 envs x {td3bc, edac} x 3 seeds x 1M updates, each in its own sub-directory")
-    run_args(p, updates=100_000, eval_every=5_000)
+    run_args(p, updates=updates, eval_every=eval_every)
     return p
 
 
@@ -64,13 +65,23 @@ def build(args) -> Study | list[Study]:
     return make_study(args.env, args.algo, args.level, args)
 
 
-def make_study(env: str, algo: str, level: str, args, extra: dict | None = None) -> Study:
-    given = {k: v for k, v in overrides(args).items() if v is not None}
-    variants = tuple(Variant.of(LABELS[mode], algo, pretrain=mode, **given) for mode in args.pretrain)
-    reference = LABELS["none"] if "none" in args.pretrain else None
+def given(args) -> dict:
+    """The hyper-parameters set on the command line (the rest take the per-env defaults)."""
+    return {k: v for k, v in overrides(args).items() if v is not None}
+
+
+def pretrain_variants(algo: str, modes, args) -> tuple[Variant, ...]:
+    return tuple(Variant.of(LABELS[mode], algo, **({"pretrain": mode} | given(args))) for mode in modes)
+
+
+def make_study(env: str, algo: str, level: str, args, extra: dict | None = None,
+               variants: tuple[Variant, ...] | None = None, reference: str | None = None, name: str = "") -> Study:
+    if variants is None:
+        variants = pretrain_variants(algo, args.pretrain, args)
+        reference = LABELS["none"] if "none" in args.pretrain else None
     fields = study_fields(args) | (extra or {})
     dataset = args.dataset_path or f"{env}-{level}"
-    return Study(name=f"{env}-{level}-{algo}", dataset=dataset, env=env, variants=variants,
+    return Study(name=name or f"{env}-{level}-{algo}", dataset=dataset, env=env, variants=variants,
                  reference=reference, **fields)
 
 

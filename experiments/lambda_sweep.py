@@ -1,0 +1,31 @@
+"""Appendix D: the TD weight lambda in critic pre-training, lambda in {0, 0.1, 0.5, 1}, plus no pre-training.
+
+Default: TD3+BC on halfcheetah-medium (where the paper finds lambda > 0 smooths the hand-over), 3 vmapped seeds,
+100k updates per variant.  `--lambda-mode target` uses eq. 5 target mixing instead of the authors' loss mixing.
+
+    python -m experiments.lambda_sweep [--env hopper] [--lambdas 0 0.1 0.5 1] [--lambda-mode target]
+"""
+import sys
+
+from experiments.common import main_guard
+from experiments.mujoco_medium import given, make_study, parser
+from offrl_jax.runner import Variant
+
+
+def build(args):
+    extra = {k: v for k, v in given(args).items() if k != "lam"}
+    variants = tuple(Variant.of(f"lambda={lam:g}", args.algo, **({"pretrain": "actor+critic", "lam": lam} | extra))
+                     for lam in args.lambdas)
+    variants += (Variant.of("scratch", args.algo, **({"pretrain": "none"} | extra)),)
+    return make_study(args.env, args.algo, args.level, args, variants=variants, reference="scratch",
+                      name=f"lambda-{args.env}-{args.level}-{args.algo}")
+
+
+def main(argv=None) -> int:
+    p = parser("experiments.lambda_sweep", __doc__, env="halfcheetah")
+    p.add_argument("--lambdas", type=float, nargs="+", default=[0.0, 0.1, 0.5, 1.0])
+    return main_guard(build, p, argv)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,36 @@
+"""Appendix B: LayerNorm in the actor only / critic only / both / neither (TD3+BC, no pre-training).
+
+Default: TD3+BC on hopper-medium and halfcheetah-medium, 3 vmapped seeds, 100k updates per variant (8 runs in all:
+about 2 hours on 2 CPU cores; pass --env to run one env).
+
+    python -m experiments.layernorm [--env hopper] [--updates N]
+"""
+import sys
+
+from experiments.common import main_guard
+from experiments.mujoco_medium import given, make_study, parser
+from offrl_jax.runner import Variant
+
+COMBOS = {"LN actor+critic": (True, True), "LN actor only": (True, False), "LN critic only": (False, True),
+          "no LN": (False, False)}
+
+
+def build(args):
+    envs = [args.env] if args.env else ["hopper", "halfcheetah"]
+    extra = {k: v for k, v in given(args).items() if k not in ("actor_layer_norm", "critic_layer_norm")}
+    studies = []
+    for env in envs:
+        variants = tuple(Variant.of(label, args.algo, **({"pretrain": "none", "actor_layer_norm": a,
+                                                          "critic_layer_norm": c} | extra))
+                         for label, (a, c) in COMBOS.items())
+        studies.append(make_study(env, args.algo, args.level, args, variants=variants, reference="LN actor+critic",
+                                  name=f"layernorm-{env}-{args.level}-{args.algo}"))
+    return studies if len(studies) > 1 else studies[0]
+
+
+def main(argv=None) -> int:
+    return main_guard(build, parser("experiments.layernorm", __doc__, env=None), argv)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

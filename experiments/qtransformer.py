@@ -1,0 +1,31 @@
+"""Appendix F: the Q-Transformer objective max(MC, r + gamma Q') throughout training vs our actor+critic
+pre-training vs neither (TD3+BC).
+
+Default: hopper-medium, 3 vmapped seeds, 100k updates per variant.
+
+    python -m experiments.qtransformer [--env walker2d] [--updates N]
+"""
+import sys
+
+from experiments.common import main_guard
+from experiments.mujoco_medium import given, make_study, parser
+from offrl_jax.runner import Variant
+
+
+def build(args):
+    extra = given(args)
+    variants = (Variant.of("pretrained", args.algo, **({"pretrain": "actor+critic"} | extra)),
+                Variant.of("max(MC,Q) target", args.algo, **({"pretrain": "none", "target": "max_mc"} | extra)),
+                Variant.of("scratch", args.algo, **({"pretrain": "none"} | extra)))
+    return make_study(args.env, args.algo, args.level, args, variants=variants, reference="scratch",
+                      name=f"qtransformer-{args.env}-{args.level}-{args.algo}")
+
+
+def main(argv=None) -> int:
+    p = parser("experiments.qtransformer", __doc__)
+    p.set_defaults(algo="td3bc")
+    return main_guard(build, p, argv)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
