@@ -61,6 +61,7 @@ class Study:
     checkpoint_every: int = 0  # 0 = at every evaluation
     transitions: int | None = None  # cap the dataset size (quick runs, tests)
     reference: str | None = None  # label of the from-scratch variant whose final score is the asymptote
+    final_window: tuple[int, int] | None = None  # final score = mean of evaluations in [lo, hi] (Adroit protocol)
 
     def __post_init__(self):
         for name in ("updates", "eval_every", "eval_episodes", "batch_size"):
@@ -86,6 +87,7 @@ class Study:
         raw["variants"] = tuple(Variant(v["label"], v["algo"], tuple(tuple(o) for o in v["overrides"]))
                                 for v in raw["variants"])
         raw["seeds"] = tuple(raw["seeds"])
+        raw["final_window"] = tuple(raw["final_window"]) if raw.get("final_window") else None
         return Study(**raw)
 
 
@@ -200,13 +202,17 @@ def score_matrix(rows: list[dict], label: str) -> tuple[np.ndarray, np.ndarray, 
 
 
 def summarize(study: Study, rows: list[dict], pretrain_ends: dict[str, int]) -> list[dict]:
-    """Per variant: final score (mean of the last 10 % of evaluations per seed; mean and 95 % CI over seeds), the
-    from-scratch asymptote, and the first evaluation at which the seed-mean reaches 90 % of it."""
+    """Per variant: final score (per seed, the mean of the last 10 % of evaluations, or of those inside
+    `final_window`; then mean and 95 % CI over seeds), the from-scratch asymptote, and the first evaluation at which
+    the seed-mean reaches 90 % of it."""
     finals = {}
     for v in study.variants:
         updates, _, scores = score_matrix(rows, v.label)
-        last = max(1, int(round(0.1 * len(updates))))
-        finals[v.label] = np.nanmean(scores[:, -last:], axis=1) if len(updates) else np.array([np.nan])
+        if study.final_window:
+            keep = (updates >= study.final_window[0]) & (updates <= study.final_window[1])
+        else:
+            keep = np.arange(len(updates)) >= len(updates) - max(1, int(round(0.1 * len(updates))))
+        finals[v.label] = np.nanmean(scores[:, keep], axis=1) if keep.any() else np.full(len(study.seeds), np.nan)
     reference = study.reference or study.variants[-1].label
     asymptote = float(np.nanmean(finals[reference])) if reference in finals else float("nan")
     summary = []
@@ -218,6 +224,7 @@ def summarize(study: Study, rows: list[dict], pretrain_ends: dict[str, int]) -> 
             "variant": v.label, "env": study.env, "dataset": study.dataset, "algo": v.algo,
             "pretrain": getattr(config, "pretrain", "none"), "seeds": list(study.seeds), "updates": study.updates,
             "final_score_mean": float(np.nanmean(finals[v.label])), "final_score_ci95": ci95(finals[v.label]),
+            "final_score_std": float(np.nanstd(finals[v.label], ddof=1)) if len(study.seeds) > 1 else 0.0,
             "asymptote": asymptote,
             "updates_to_90pct": int(updates[reached[0]]) if len(reached) else None,
             "seconds_to_90pct": float(seconds[reached[0]]) if len(reached) else None,

@@ -1,0 +1,68 @@
+"""Re-compute the Adroit random (min) scores for the paper's longer time limits (Appendix H, Table 4) by running the
+independent uniform random policy, and compare with the paper's figures.
+
+    python -m experiments.adroit_random_scores [--episodes 100] [--envs door pen] [--out DIR]
+
+Prints one row per env: time limit, episodes, mean return, its standard error, the paper's value and the difference
+in standard errors.  With --out, writes scores.json there.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+from tqdm.auto import tqdm
+
+from offrl_jax.checkpoint import atomic_write_text
+from offrl_jax.envs import ENVS, make_env
+
+PAPER_TABLE4 = {"pen": -162.09, "door": -84.52, "hammer": -856.83, "relocate": -37.95}
+
+
+def random_returns(env_name: str, episodes: int, seed: int) -> np.ndarray:
+    env = make_env(env_name, disable_env_checker=True)
+    env.action_space.seed(seed)
+    returns = np.zeros(episodes)
+    for i in tqdm(range(episodes), desc=env_name, leave=False, file=sys.stderr):
+        env.reset(seed=seed + i)
+        done = False
+        while not done:
+            _, reward, terminated, truncated, _ = env.step(env.action_space.sample())
+            returns[i] += reward
+            done = terminated or truncated
+    env.close()
+    return returns
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="experiments.adroit_random_scores", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--episodes", type=int, default=100)
+    ap.add_argument("--envs", nargs="+", choices=tuple(PAPER_TABLE4), default=list(PAPER_TABLE4))
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--out", type=Path, default=None)
+    args = ap.parse_args(argv)
+    if args.episodes < 2:
+        print("error: --episodes must be >= 2 (for a standard error)", file=sys.stderr)
+        return 2
+    rows = []
+    print(f"{'env':<9} {'limit':>5} {'episodes':>8} {'mean':>10} {'s.e.':>7} {'paper':>9} {'diff/s.e.':>9}")
+    for name in args.envs:
+        r = random_returns(name, args.episodes, args.seed)
+        mean, se = float(r.mean()), float(r.std(ddof=1) / np.sqrt(len(r)))
+        row = {"env": name, "time_limit": ENVS[name].max_episode_steps, "episodes": args.episodes, "mean": mean,
+               "standard_error": se, "paper": PAPER_TABLE4[name], "diff_in_se": (mean - PAPER_TABLE4[name]) / se}
+        rows.append(row)
+        print(f"{name:<9} {row['time_limit']:>5} {args.episodes:>8} {mean:>10.2f} {se:>7.2f} {row['paper']:>9.2f} "
+              f"{row['diff_in_se']:>9.1f}", flush=True)
+    if args.out:
+        args.out.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(args.out / "scores.json", json.dumps(rows, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
