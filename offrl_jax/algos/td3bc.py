@@ -84,6 +84,7 @@ class TD3BC:
         self.cfg, self.obs_dim, self.act_dim = config, obs_dim, act_dim
         self.actor = DeterministicActor(act_dim, config.hidden, config.actor_layer_norm)
         self.critic = CriticEnsemble(config.num_critics, config.hidden, config.critic_layer_norm)
+        self.first_critic = CriticEnsemble(1, config.hidden, config.critic_layer_norm)  # member 0's parameters only
         self.actor_tx = optax.adam(config.actor_lr)
         self.critic_tx = optax.adam(config.critic_lr)
 
@@ -153,7 +154,8 @@ class TD3BC:
 
     def actor_loss(self, params, state, batch: Batch):
         pi = self.actor.apply(params, batch["observations"])
-        q = self.critic.apply(state.critic.params, batch["observations"], pi)[0]
+        first = jax.tree.map(lambda p: p[:1], state.critic.params)  # TD3 uses Q_1 alone for the actor
+        q = self.first_critic.apply(first, batch["observations"], pi)[0]
         loss = L.td3bc_actor_loss(q, pi, batch["actions"], self.cfg.alpha)
         return loss, {"actor_loss": loss, "bc_mse": L.bc_loss(pi, batch["actions"])}
 
