@@ -78,7 +78,8 @@ def _policy(env: str, level: str) -> tuple[Any, dict[str, Any]]:
     if name not in shipped_policies():
         raise FileNotFoundError(
             f"no shipped '{name}' policy in {POLICY_DIR}; train one with `python -m offrl_jax.data.generate.sac "
-            f"--env {env} --out {sac_run_dir(env)}` and ship a checkpoint (see docs/datasets.md)"
+            f"--env {env} --out DIR` and ship a checkpoint with `python -m offrl_jax.data.generate.ship --run DIR "
+            f"--level {level}` (see docs/datasets.md)"
         )
     params, meta = load_policy(name)
     meta["sha256"] = hashlib.sha256(Path(meta["path"]).read_bytes()).hexdigest()
