@@ -200,6 +200,10 @@ def generate(name: str, transitions: int | None = None, out_dir: str | Path | No
     out_dir: the dataset directory (default `cache_dir()/"datasets"/name`); an existing one raises unless overwrite.
     seed: env / action-noise seed of the rollouts.  sac_run: SAC run directory for the replay levels.
     """
+    if name == "door-cloned":
+        from offrl_jax.data.generate.door_cloned import generate_door_cloned
+
+        return generate_door_cloned(transitions or 1_000_000, out_dir, seed, overwrite=overwrite, progress=progress)
     env, level = parse_name(name)
     out = Path(out_dir) if out_dir is not None else default_dir(name)
     if out.exists() and not overwrite:
