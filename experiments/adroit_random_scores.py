@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 from tqdm.auto import tqdm
 
+from experiments.common import OneLineParser
 from offrl_jax.checkpoint import atomic_write_text
 from offrl_jax.envs import ENVS, make_env
 
@@ -38,7 +39,7 @@ def random_returns(env_name: str, episodes: int, seed: int) -> np.ndarray:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="experiments.adroit_random_scores", description=__doc__,
+    ap = OneLineParser(prog="experiments.adroit_random_scores", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--episodes", type=int, default=100)
     ap.add_argument("--envs", nargs="+", choices=tuple(PAPER_TABLE4), default=list(PAPER_TABLE4))

@@ -81,7 +81,7 @@ def study_fields(args) -> dict:
 
 def load_data(study: Study, args):
     source = study.dataset
-    ds = datasets.load(source, transitions=study.transitions, clip_actions=args.clip_actions or None)
+    ds = datasets.load(source, transitions=study.transitions, clip_actions=args.clip_actions or None, env=study.env)
     if study.transitions and len(ds) > study.transitions:
         ds = ds.select(slice(0, study.transitions))
     if ds.env is not None and ds.env != study.env:

@@ -16,6 +16,7 @@ import json
 
 import numpy as np
 
+from experiments.common import OneLineParser
 from offrl_jax.data.returns import returns_to_go
 
 RIGHT, LEFT = "->", "<-"
@@ -55,7 +56,7 @@ def table1() -> dict[str, list[list[float]]]:
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = OneLineParser(prog="experiments.tabular", description=__doc__.split("\n\n")[0])
     parser.add_argument("--json", action="store_true", help="print the table as JSON")
     args = parser.parse_args(argv)
     result = table1()

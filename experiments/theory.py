@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from experiments.common import OneLineParser
 from offrl_jax.checkpoint import atomic_write_text
 
 
@@ -129,7 +130,7 @@ def _fmt(x: float | None) -> str:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="experiments.theory", description=__doc__,
+    ap = OneLineParser(prog="experiments.theory", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--mdps", type=int, default=20)
     ap.add_argument("--states", type=int, default=50)

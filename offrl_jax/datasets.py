@@ -98,12 +98,13 @@ def _load_generated(name: str, transitions, clip_actions, generate_if_missing: b
 
 
 def load(name_or_path, *, transitions: int | None = None, clip_actions: bool | None = None,
-         generate_if_missing: bool = True) -> Dataset:
+         generate_if_missing: bool = True, env: str | None = None) -> Dataset:
     """A validated `Dataset` from a known name (see `KNOWN`) or a path / Minari id (see `load_dataset_path`).
 
     transitions: size to generate when a generated name is not cached yet (None: the generator's default).
     clip_actions: clip out-of-range actions with a warning instead of failing; None: the reader's default (True
       for the door human demonstrations, whose out-of-range values the env clips anyway; False otherwise).
+    env: the env the data must fit (a file's observation/action dims and action bounds are checked against it).
     """
     name = str(name_or_path)
     if name in SHARED_NAMES:
@@ -115,7 +116,7 @@ def load(name_or_path, *, transitions: int | None = None, clip_actions: bool | N
                        or (minari_root() / name).is_dir())
     if not looks_like_path:
         raise _unknown(name)
-    return load_dataset_path(name, clip_actions=clip_actions)
+    return load_dataset_path(name, env=env, clip_actions=clip_actions)
 
 
 def summary(ds: Dataset) -> dict:
