@@ -1,0 +1,354 @@
+"""Updates/s of every algorithm and phase through the real driver chunk function, against the machine's matmul rate.
+
+    python -m benchmarks.throughput [--algo A ...] [--seeds S ...] [--json] [--quick] [--out NAME]
+
+For each case (algorithm, phase, ensemble size) and each S vmapped seeds: `offrl_jax.driver.make_chunk_fn` on a
+synthetic 100k-transition hopper-shaped dataset (obs 11, act 3), batch 256, default network sizes; compile time
+(trace + lower + XLA compile) reported separately; one warm-up chunk, then the median of a few timed chunks.
+
+    updates_per_s       gradient updates per second summed over the S seeds (one TD3 call = policy_delay updates)
+    gflop_per_update    analytic matmul GFLOPs of one update of one seed (benchmarks/flops.py)
+    achieved_gflops     updates_per_s * gflop_per_update
+    peak_gflops         this run's rate of a jitted chain of 256-wide dense layers at batch 256, measured right
+                        before the case (the background load changes); `matmul1024_gflops` is a 1024^2 matmul
+    pct_of_peak         100 * achieved_gflops / peak_gflops
+
+Seeds are placed as `Driver` places them (`offrl_jax.driver.seed_sharding`): the seed axis split over every device
+that divides S, the dataset replicated; e.g. XLA_FLAGS=--xla_force_host_platform_device_count=2 gives 2 CPU devices.
+
+Progress goes to stderr, results to stdout (a table, or one JSON object per line with --json).  `--out NAME` also
+writes the JSON lines to results/benchmarks/NAME.jsonl (first line: {"meta": {command, date, machine, load}}).
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import datetime
+import json
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from benchmarks.flops import chain_flops, update_flops
+from offrl_jax.algos import make_algorithm, make_config
+from offrl_jax.data.dataset import Dataset
+from offrl_jax.driver import CHUNK, INIT, device_data, make_chunk_fn, seed_keys, seed_sharding
+
+OBS_DIM, ACT_DIM, BATCH = 11, 3, 256  # hopper
+RESULTS_DIR = Path("results/benchmarks")
+
+
+@dataclasses.dataclass(frozen=True)
+class Case:
+    algo: str  # registry name
+    phase: str  # label reported in the JSON
+    phase_name: str  # `Phase.name` inside algo.phases(...)
+    overrides: tuple[tuple[str, Any], ...] = ()
+
+    @property
+    def config(self):
+        return make_config(self.algo, "hopper", **dict(self.overrides))
+
+    @property
+    def label(self) -> str:
+        n = self.config.num_critics
+        return f"{self.algo}/{self.phase}" + (f"/N={n}" if self.algo in ("edac", "sacn", "edac_bc") else "")
+
+
+CASES: list[Case] = [
+    Case("bc", "bc", "actor_pretrain"),
+    Case("td3bc", "mc_critic_pretrain", "pretrain", (("pretrain", "critic"),)),
+    Case("td3bc", "offline_rl", "offline_rl"),
+    Case("td3bc_cql", "offline_rl", "offline_rl"),
+    Case("edac", "soft_bc_pretrain", "actor_pretrain", (("num_critics", 10),)),
+    Case("edac", "soft_return_critic_pretrain", "critic_pretrain", (("num_critics", 10),)),
+    Case("edac", "offline_rl", "offline_rl", (("num_critics", 10),)),
+    Case("edac", "offline_rl", "offline_rl", (("num_critics", 50),)),
+    Case("sacn", "offline_rl", "offline_rl", (("num_critics", 10),)),
+    Case("sacn", "offline_rl", "offline_rl", (("num_critics", 50),)),
+    Case("edac_bc", "offline_rl", "offline_rl", (("num_critics", 10),)),
+    Case("cql", "offline_rl", "offline_rl"),
+]
+QUICK_CASE = Case("bc", "bc", "actor_pretrain")
+
+
+def log(*args) -> None:
+    print(*args, file=sys.stderr, flush=True)
+
+
+# ------------------------------------------------------------------------------------------------ peak rate probes
+
+
+def _median_rate(fn, args, flops: float, reps: int) -> float:
+    jax.block_until_ready(fn(*args))
+    times = []
+    for _ in range(reps):
+        tic = time.perf_counter()
+        jax.block_until_ready(fn(*args))
+        times.append(time.perf_counter() - tic)
+    return flops / float(np.median(times)) / 1e9
+
+
+_CHAIN_LAYERS, _CHAIN_REPEATS = 8, 16
+
+
+@jax.jit
+def _chain(x, ws, bs):
+    def layer(x, wb):
+        return jax.nn.relu(x @ wb[0] + wb[1]), None
+
+    def block(x, _):
+        return jax.lax.scan(layer, x, (ws, bs))[0], None
+
+    return jax.lax.scan(block, x, None, length=_CHAIN_REPEATS)[0]
+
+
+def chain_rate(reps: int = 7, width: int = 256, batch: int = BATCH) -> float:
+    """GFLOP/s of a jitted chain of `width`-wide dense+ReLU layers at batch `batch` (matmul FLOPs only)."""
+    k1, k2 = jax.random.split(jax.random.PRNGKey(0))
+    ws = jax.random.normal(k1, (_CHAIN_LAYERS, width, width)) / np.sqrt(width)
+    bs = jnp.zeros((_CHAIN_LAYERS, width))
+    x = jax.random.normal(k2, (batch, width))
+    return _median_rate(_chain, (x, ws, bs), chain_flops(width, batch, _CHAIN_LAYERS * _CHAIN_REPEATS), reps)
+
+
+@jax.jit
+def _matmul(a, b):
+    return a @ b
+
+
+def matmul_rate(n: int = 1024, reps: int = 7) -> float:
+    """GFLOP/s of one jitted n x n x n float32 matmul."""
+    k1, k2 = jax.random.split(jax.random.PRNGKey(1))
+    a, b = jax.random.normal(k1, (n, n)), jax.random.normal(k2, (n, n))
+    return _median_rate(_matmul, (a, b), 2.0 * n**3, reps)
+
+
+# ------------------------------------------------------------------------------------------------------- dataset
+
+
+def synthetic_data(transitions: int, seed: int = 0) -> dict[str, jax.Array]:
+    """A random hopper-shaped dataset (episodes of 1000 steps, a few terminals) as the driver's device arrays."""
+    rng = np.random.default_rng(seed)
+    obs = rng.normal(size=(transitions + 1, OBS_DIM)).astype(np.float32)
+    timeouts = np.zeros(transitions, np.float32)
+    timeouts[999::1000] = 1
+    terminals = np.zeros(transitions, np.float32)
+    terminals[500::3000] = 1
+    ds = Dataset(obs[:-1], rng.uniform(-1, 1, (transitions, ACT_DIM)).astype(np.float32),
+                 (1.0 + 0.1 * obs[:-1, 0]).astype(np.float32), obs[1:], terminals, timeouts, env="hopper",
+                 name="hopper-synthetic", source="synthetic")
+    data, _ = device_data(ds, 0.99)
+    return data
+
+
+# -------------------------------------------------------------------------------------------------------- timing
+
+
+_INIT_CACHE: dict[tuple, Any] = {}
+
+
+def init_states(case: Case, max_seeds: int, n_rows: int):
+    """Agent states for seeds 0..max_seeds-1, as `Driver.init` makes them but jitted (the eager vmap of the flax
+    initialisers takes seconds); the first S of them are exactly S-seed `Driver.init` states.  Cached across cases
+    whose networks are the same (e.g. TD3+BC and TD3+BC+CQL)."""
+    config = case.config
+    key = (type(config).__name__, config.num_critics, tuple(config.hidden), config.actor_layer_norm,
+           config.critic_layer_norm, getattr(config, "init_alpha", None), max_seeds, n_rows)
+    if key not in _INIT_CACHE:
+        algo = make_algorithm(config, OBS_DIM, ACT_DIM, n_rows)
+        _INIT_CACHE[key] = jax.jit(jax.vmap(algo.init))(seed_keys(tuple(range(max_seeds)), INIT, 0))
+    return _INIT_CACHE[key]
+
+
+def time_case(case: Case, seeds: int, data: dict[str, jax.Array], all_states, peak: float, expect_gflops: float,
+              target_s: float, max_reps: int, heavy_s: float) -> dict[str, Any]:
+    """Compile and time the chunk function of `case` for `seeds` vmapped seeds.
+
+    Chunk length: about `target_s` seconds at `expect_gflops`.  One warm-up chunk, then the median of `max_reps`
+    timed chunks; a chunk predicted to take more than `heavy_s` seconds (at least one update call for every seed
+    is always run) is timed once, with no warm-up (the first-call overhead is small against it).
+    """
+    config = case.config
+    n_rows = int(data["rewards"].shape[0])
+    algo = make_algorithm(config, OBS_DIM, ACT_DIM, n_rows)
+    total = getattr(config, "pretrain_updates", 0) + 1000
+    phase = next(p for p in algo.phases(total) if p.name == case.phase_name)
+    per_update, _ = update_flops(config, case.phase_name, OBS_DIM, ACT_DIM, BATCH)
+    per_call = per_update * phase.updates_per_call
+    calls = int(np.clip(round(target_s * expect_gflops * 1e9 / (per_call * seeds)), 1, 2000))
+    predicted_s = calls * per_call * seeds / (expect_gflops * 1e9)
+
+    seed_ids = tuple(range(seeds))
+    states = jax.tree.map(lambda x: jnp.array(x[:seeds], copy=True), all_states)  # own buffers: donated
+    keys = seed_keys(seed_ids, CHUNK, 0)
+    sharding, replicated = seed_sharding(seeds)  # as `Driver` places them: the seed axis split over the devices
+    states, keys = jax.device_put(states, sharding), jax.device_put(keys, sharding)
+    data = jax.device_put(data, replicated)
+    tic = time.perf_counter()
+    compiled = make_chunk_fn(phase, BATCH, calls).lower(states, data, keys).compile()
+    compile_s = time.perf_counter() - tic
+
+    def run_chunk(states, index):
+        k = jax.device_put(seed_keys(seed_ids, CHUNK, index), sharding)
+        tic = time.perf_counter()
+        states, metrics = compiled(states, data, k)
+        jax.block_until_ready((states, metrics))
+        return states, time.perf_counter() - tic, bool(np.all(metrics["finite"]))
+
+    warmup = predicted_s <= heavy_s
+    reps = max_reps
+    if warmup:
+        states, warm_s, _ = run_chunk(states, 1)
+        if warm_s > heavy_s:
+            reps = 1
+    else:
+        reps = 1
+    times, finite = [], True
+    for r in range(reps):
+        states, dt, ok = run_chunk(states, 2 + r)
+        times.append(dt)
+        finite &= ok
+    chunk_s = float(np.median(times))
+    updates_per_s = calls * phase.updates_per_call * seeds / chunk_s
+    achieved = updates_per_s * per_update / 1e9
+    return {
+        "algo": case.algo,
+        "phase": case.phase,
+        "seeds": seeds,
+        "updates_per_s": round(updates_per_s, 2),
+        "compile_s": round(compile_s, 2),
+        "gflop_per_update": round(per_update / 1e9, 4),
+        "achieved_gflops": round(achieved, 2),
+        "peak_gflops": round(peak, 2),
+        "pct_of_peak": round(100 * achieved / peak, 1),
+        "num_critics": config.num_critics,
+        "devices": len(sharding.mesh.devices.flat),
+        "updates_per_chunk": calls * phase.updates_per_call,
+        "timed_chunks": reps,
+        "warmup": warmup,
+        "chunk_s": round(chunk_s, 4),
+        "finite": finite,
+        "load1": round(os.getloadavg()[0], 2),
+    }
+
+
+def machine() -> str:
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return f"{cpu}, {os.cpu_count()} logical CPUs, jax {jax.__version__} ({jax.default_backend()})"
+
+
+def format_row(r: dict[str, Any]) -> str:
+    return (f"{r['algo']:<10} {r['phase']:<28} {r['num_critics']:>3} {r['seeds']:>2} {r['updates_per_s']:>9.1f} "
+            f"{r['compile_s']:>7.1f} {r['gflop_per_update']:>8.4f} {r['achieved_gflops']:>8.1f} "
+            f"{r['peak_gflops']:>7.1f} {r['pct_of_peak']:>6.1f} {r['load1']:>5.2f}")
+
+
+HEADER = (f"{'algo':<10} {'phase':<28} {'N':>3} {'S':>2} {'upd/s':>9} {'comp_s':>7} {'GF/upd':>8} {'GF/s':>8} "
+          f"{'peak':>7} {'%peak':>6} {'load':>5}")
+
+
+def markdown(records: list[dict[str, Any]]) -> str:
+    """A README table of JSON records (`--markdown FILE`)."""
+    rows = ["| algo | phase | N | S | updates/s | compile s | GFLOP/update | GFLOP/s | peak GFLOP/s | % of peak "
+            "| load |",
+            "|---|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|"]
+    for r in records:
+        rows.append(f"| {r['algo']} | {r['phase']} | {r['num_critics']} | {r['seeds']} | {r['updates_per_s']:.1f} | "
+                    f"{r['compile_s']:.1f} | {r['gflop_per_update']:.3f} | {r['achieved_gflops']:.1f} | "
+                    f"{r['peak_gflops']:.0f} | {r['pct_of_peak']:.0f} | {r['load1']:.1f} |")
+    return "\n".join(rows)
+
+
+def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawTextHelpFormatter)
+    p.add_argument("--algo", nargs="*", help="only these registry names (default: all)")
+    p.add_argument("--seeds", nargs="*", type=int, default=[1, 2, 4, 8], help="vmapped seed counts (default 1 2 4 8)")
+    p.add_argument("--phase", nargs="*", help="only these phase labels (e.g. offline_rl)")
+    p.add_argument("--num-critics", nargs="*", type=int, help="only cases with these ensemble sizes")
+    p.add_argument("--json", action="store_true", help="one JSON object per case on stdout")
+    p.add_argument("--quick", action="store_true", help="one tiny case (BC, S=1, 10k rows): a smoke test")
+    p.add_argument("--transitions", type=int, default=100_000)
+    p.add_argument("--target-s", type=float, default=0.25, help="aimed-for seconds per timed chunk")
+    p.add_argument("--reps", type=int, default=3, help="timed chunks per case after a warm-up (median reported)")
+    p.add_argument("--heavy-s", type=float, default=1.5,
+                   help="chunks longer than this (one call per seed) are timed once without warm-up")
+    p.add_argument("--markdown", metavar="FILE", help="print a markdown table of a results .jsonl file and exit")
+    p.add_argument("--out", help="also write JSON lines to results/benchmarks/OUT.jsonl (or OUT if it is a path)")
+    args = p.parse_args(argv)
+
+    if args.markdown:
+        lines = [json.loads(line) for line in Path(args.markdown).read_text().splitlines() if line.strip()]
+        if lines and "meta" in lines[0]:
+            m = lines.pop(0)["meta"]
+            print(f"`{m['command']}` — {m['date']}, {m['machine']}, load average at start {m['load_avg']}, "
+                  f"{m.get('seconds', '?')} s, 1024² matmul {m.get('matmul1024_gflops', '?')} GFLOP/s\n")
+        print(markdown(lines))
+        return lines
+    if args.quick:
+        cases, seed_counts = [QUICK_CASE], [1]
+        args.transitions, args.target_s, args.reps = min(args.transitions, 10_000), 0.1, 2
+    else:
+        cases = [c for c in CASES if (not args.algo or c.algo in args.algo)
+                 and (not args.phase or c.phase in args.phase)
+                 and (not args.num_critics or c.config.num_critics in args.num_critics)]
+        seed_counts = args.seeds
+        if not cases:
+            p.error(f"no case for --algo {args.algo} --phase {args.phase} --num-critics {args.num_critics}")
+
+    meta = {"command": " ".join([Path(sys.executable).name, "-m", "benchmarks.throughput", *sys.argv[1:]]),
+            "date": datetime.datetime.now().isoformat(timespec="seconds"), "machine": machine(),
+            "load_avg": [round(x, 2) for x in os.getloadavg()], "xla_flags": os.environ.get("XLA_FLAGS", "")}
+    log(f"# {meta['date']}  {meta['machine']}  load {meta['load_avg']}  XLA_FLAGS={meta['xla_flags']!r}")
+    start = time.perf_counter()
+    data = synthetic_data(args.transitions)
+    matmul = matmul_rate()
+    log(f"# 1024^2 matmul: {matmul:.1f} GFLOP/s")
+    if not args.json:
+        print(HEADER, flush=True)
+    results = []
+    for case in cases:
+        peak = chain_rate()
+        log(f"[{time.perf_counter() - start:6.1f}s] {case.label}: 256-wide chain {peak:.1f} GFLOP/s")
+        all_states = init_states(case, max(seed_counts), int(data["rewards"].shape[0]))
+        expect = 0.4 * peak  # achieved-rate guess for sizing chunks; then the previous seed count's rate
+        for s in sorted(seed_counts):
+            r = time_case(case, s, data, all_states, peak, expect, args.target_s, args.reps, args.heavy_s)
+            expect = max(r["achieved_gflops"], 1.0)
+            r["matmul1024_gflops"] = round(matmul, 2)
+            results.append(r)
+            log(f"[{time.perf_counter() - start:6.1f}s]   S={s}: {r['updates_per_s']:.1f} updates/s "
+                f"({r['pct_of_peak']:.1f} % of peak), compile {r['compile_s']:.1f}s, load {r['load1']}")
+            print(json.dumps(r) if args.json else format_row(r), flush=True)
+    meta["seconds"] = round(time.perf_counter() - start, 1)
+    meta["matmul1024_gflops"] = round(matmul, 2)
+    log(f"# done in {meta['seconds']}s")
+    if args.out:
+        path = Path(args.out)
+        if path.parent == Path("."):
+            path = RESULTS_DIR / (path.name if path.suffix else f"{path.name}.jsonl")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with path.open("w") as f:
+            f.write(json.dumps({"meta": meta}) + "\n")
+            for r in results:
+                f.write(json.dumps(r) + "\n")
+        log(f"# wrote {path}")
+    return results
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,299 @@
+"""The same TD3+BC and EDAC updates written the way PyTorch users write them (after CORL's td3_bc.py and edac.py),
+for a side-by-side updates/s ratio against the JAX driver on the same machine.  PyTorch is an optional extra
+(`pip install -e .[torch]`, CPU build); nothing else in the package imports this module.
+
+    python -m benchmarks.torch_reference [--algo td3bc edac] [--json]     PyTorch alone
+    python -m benchmarks.torch_reference --compare                        JAX and PyTorch interleaved, with ratios
+
+Same shapes as benchmarks.throughput: hopper (obs 11, act 3), 100k random transitions, batch 256, default sizes
+(TD3+BC: 2x256 + LayerNorm, twin critics, policy delay 2; EDAC: 3x256 + LayerNorm, N = 10 vectorised critics,
+eta = 1), one seed.  Like CORL, the PyTorch TD3+BC actor loss evaluates critic 1 only, and the PyTorch EDAC
+diversity loss runs its own second forward pass of the ensemble (CORL's `_critic_diversity_loss`).
+"""
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+import math
+import os
+import sys
+import time
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+OBS_DIM, ACT_DIM, BATCH, ROWS = 11, 3, 256, 100_000
+
+
+def mlp(in_dim: int, hidden: tuple[int, ...], out_dim: int, layer_norm: bool = True) -> nn.Sequential:
+    layers: list[nn.Module] = []
+    for width in hidden:
+        layers += [nn.Linear(in_dim, width), *([nn.LayerNorm(width)] if layer_norm else []), nn.ReLU()]
+        in_dim = width
+    return nn.Sequential(*layers, nn.Linear(in_dim, out_dim))
+
+
+class Replay:
+    def __init__(self, seed: int = 0):
+        g = torch.Generator().manual_seed(seed)
+        self.obs = torch.randn(ROWS, OBS_DIM, generator=g)
+        self.next_obs = torch.randn(ROWS, OBS_DIM, generator=g)
+        self.act = torch.rand(ROWS, ACT_DIM, generator=g) * 2 - 1
+        self.rew = 1.0 + 0.1 * self.obs[:, :1]
+        self.done = torch.zeros(ROWS, 1)
+
+    def sample(self):
+        idx = torch.randint(0, ROWS, (BATCH,))
+        return self.obs[idx], self.act[idx], self.rew[idx], self.next_obs[idx], self.done[idx]
+
+
+# ----------------------------------------------------------------------------------------------------------- TD3+BC
+
+
+class Critic(nn.Module):
+    def __init__(self):
+        super().__init__()
+        self.net = mlp(OBS_DIM + ACT_DIM, (256, 256), 1)
+
+    def forward(self, s, a):
+        return self.net(torch.cat([s, a], 1))
+
+
+class TD3BC:
+    def __init__(self, alpha: float = 10.0, gamma: float = 0.99, tau: float = 0.005, policy_noise: float = 0.2,
+                 noise_clip: float = 0.5, policy_freq: int = 2, lr: float = 3e-4):
+        self.actor = mlp(OBS_DIM, (256, 256), ACT_DIM)
+        self.actor_target = copy.deepcopy(self.actor)
+        self.critic_1, self.critic_2 = Critic(), Critic()
+        self.critic_1_target, self.critic_2_target = copy.deepcopy(self.critic_1), copy.deepcopy(self.critic_2)
+        self.actor_opt = torch.optim.Adam(self.actor.parameters(), lr=lr)
+        self.critic_1_opt = torch.optim.Adam(self.critic_1.parameters(), lr=lr)
+        self.critic_2_opt = torch.optim.Adam(self.critic_2.parameters(), lr=lr)
+        self.alpha, self.gamma, self.tau = alpha, gamma, tau
+        self.policy_noise, self.noise_clip, self.policy_freq = policy_noise, noise_clip, policy_freq
+        self.total_it = 0
+
+    def train(self, batch) -> None:
+        self.total_it += 1
+        state, action, reward, next_state, done = batch
+        with torch.no_grad():
+            noise = (torch.randn_like(action) * self.policy_noise).clamp(-self.noise_clip, self.noise_clip)
+            next_action = (torch.tanh(self.actor_target(next_state)) + noise).clamp(-1.0, 1.0)
+            target_q = torch.min(self.critic_1_target(next_state, next_action),
+                                 self.critic_2_target(next_state, next_action))
+            target_q = reward + (1 - done) * self.gamma * target_q
+        critic_loss = (F.mse_loss(self.critic_1(state, action), target_q)
+                       + F.mse_loss(self.critic_2(state, action), target_q))
+        self.critic_1_opt.zero_grad()
+        self.critic_2_opt.zero_grad()
+        critic_loss.backward()
+        self.critic_1_opt.step()
+        self.critic_2_opt.step()
+        if self.total_it % self.policy_freq == 0:
+            pi = torch.tanh(self.actor(state))
+            q = self.critic_1(state, pi)
+            lmbda = self.alpha / q.abs().mean().detach()
+            actor_loss = -lmbda * q.mean() + F.mse_loss(pi, action)
+            self.actor_opt.zero_grad()
+            actor_loss.backward()
+            self.actor_opt.step()
+            with torch.no_grad():
+                for net, target in ((self.critic_1, self.critic_1_target), (self.critic_2, self.critic_2_target),
+                                    (self.actor, self.actor_target)):
+                    for p, tp in zip(net.parameters(), target.parameters()):
+                        tp.data.mul_(1 - self.tau).add_(self.tau * p.data)
+
+
+# ------------------------------------------------------------------------------------------------------------- EDAC
+
+
+class VectorizedLinear(nn.Module):
+    def __init__(self, in_features: int, out_features: int, ensemble_size: int):
+        super().__init__()
+        self.weight = nn.Parameter(torch.empty(ensemble_size, in_features, out_features))
+        self.bias = nn.Parameter(torch.empty(ensemble_size, 1, out_features))
+        for layer in range(ensemble_size):
+            nn.init.kaiming_uniform_(self.weight[layer], a=math.sqrt(5))
+        nn.init.uniform_(self.bias, -1 / math.sqrt(in_features), 1 / math.sqrt(in_features))
+
+    def forward(self, x):  # (N, B, in) -> (N, B, out)
+        return x @ self.weight + self.bias
+
+
+class VectorizedCritic(nn.Module):
+    def __init__(self, num_critics: int, hidden: int = 256, depth: int = 3):
+        super().__init__()
+        layers: list[nn.Module] = []
+        in_dim = OBS_DIM + ACT_DIM
+        for _ in range(depth):
+            layers += [VectorizedLinear(in_dim, hidden, num_critics), nn.LayerNorm(hidden), nn.ReLU()]
+            in_dim = hidden
+        layers.append(VectorizedLinear(hidden, 1, num_critics))
+        self.critic = nn.Sequential(*layers)
+        self.num_critics = num_critics
+
+    def forward(self, state, action):
+        sa = torch.cat([state, action], dim=-1)
+        if sa.dim() != 3:
+            sa = sa.unsqueeze(0).repeat_interleave(self.num_critics, dim=0)
+        return self.critic(sa).squeeze(-1)  # (N, B)
+
+
+class Actor(nn.Module):
+    def __init__(self, hidden: int = 256):
+        super().__init__()
+        self.trunk = nn.Sequential(nn.Linear(OBS_DIM, hidden), nn.LayerNorm(hidden), nn.ReLU(),
+                                   nn.Linear(hidden, hidden), nn.LayerNorm(hidden), nn.ReLU(),
+                                   nn.Linear(hidden, hidden), nn.LayerNorm(hidden), nn.ReLU())
+        self.mu, self.log_sigma = nn.Linear(hidden, ACT_DIM), nn.Linear(hidden, ACT_DIM)
+
+    def forward(self, state):
+        h = self.trunk(state)
+        mu, log_sigma = self.mu(h), torch.clip(self.log_sigma(h), -5, 2)
+        dist = torch.distributions.Normal(mu, torch.exp(log_sigma))
+        action = dist.rsample()
+        tanh_action = torch.tanh(action)
+        log_prob = dist.log_prob(action).sum(-1) - torch.log(1 - tanh_action.pow(2) + 1e-6).sum(-1)
+        return tanh_action, log_prob
+
+
+class EDAC:
+    def __init__(self, num_critics: int = 10, eta: float = 1.0, gamma: float = 0.99, tau: float = 0.005,
+                 lr: float = 3e-4):
+        self.actor, self.critic = Actor(), VectorizedCritic(num_critics)
+        self.target_critic = copy.deepcopy(self.critic)
+        self.log_alpha = torch.tensor([0.0], requires_grad=True)
+        self.actor_opt = torch.optim.Adam(self.actor.parameters(), lr=lr)
+        self.critic_opt = torch.optim.Adam(self.critic.parameters(), lr=lr)
+        self.alpha_opt = torch.optim.Adam([self.log_alpha], lr=lr)
+        self.alpha = self.log_alpha.exp().detach()
+        self.num_critics, self.eta, self.gamma, self.tau = num_critics, eta, gamma, tau
+        self.target_entropy = -float(ACT_DIM)
+
+    def diversity_loss(self, state, action):
+        n = self.num_critics
+        state = state.unsqueeze(0).repeat_interleave(n, dim=0)
+        action = action.unsqueeze(0).repeat_interleave(n, dim=0).requires_grad_(True)
+        q_ensemble = self.critic(state, action)
+        grads = torch.autograd.grad(q_ensemble.sum(), action, retain_graph=True, create_graph=True)[0]
+        grads = grads / (torch.norm(grads, p=2, dim=2).unsqueeze(-1) + 1e-10)
+        grads = grads.transpose(0, 1)
+        masks = torch.eye(n).unsqueeze(0).repeat(grads.shape[0], 1, 1)
+        gram = (1 - masks) * (grads @ grads.permute(0, 2, 1))
+        return gram.sum(dim=(1, 2)).mean() / (n - 1)
+
+    def update(self, batch) -> None:
+        state, action, reward, next_state, done = batch
+        with torch.no_grad():
+            _, log_prob = self.actor(state)
+        alpha_loss = (-self.log_alpha * (log_prob + self.target_entropy)).mean()
+        self.alpha_opt.zero_grad()
+        alpha_loss.backward()
+        self.alpha_opt.step()
+        self.alpha = self.log_alpha.exp().detach()
+
+        pi, log_prob = self.actor(state)
+        actor_loss = (self.alpha * log_prob - self.critic(state, pi).min(0).values).mean()
+        self.actor_opt.zero_grad()
+        actor_loss.backward()
+        self.actor_opt.step()
+
+        with torch.no_grad():
+            next_action, next_log_prob = self.actor(next_state)
+            q_next = self.target_critic(next_state, next_action).min(0).values - self.alpha * next_log_prob
+            target = reward.squeeze(-1) + self.gamma * (1 - done.squeeze(-1)) * q_next
+        q = self.critic(state, action)
+        critic_loss = ((q - target.view(1, -1)) ** 2).mean(dim=1).sum(dim=0)
+        loss = critic_loss + self.eta * self.diversity_loss(state, action)
+        self.critic_opt.zero_grad()
+        loss.backward()
+        self.critic_opt.step()
+        with torch.no_grad():
+            for p, tp in zip(self.critic.parameters(), self.target_critic.parameters()):
+                tp.data.mul_(1 - self.tau).add_(self.tau * p.data)
+
+
+# ----------------------------------------------------------------------------------------------------------- timing
+
+
+def make(algo: str):
+    agent = TD3BC() if algo == "td3bc" else EDAC(num_critics=10)
+    return agent.train if algo == "td3bc" else agent.update
+
+
+def time_torch(step, replay: Replay, updates: int) -> float:
+    """Seconds per update over `updates` updates (sampling included, as in the JAX scan)."""
+    tic = time.perf_counter()
+    for _ in range(updates):
+        step(replay.sample())
+    return (time.perf_counter() - tic) / updates
+
+
+def torch_updates(algo: str, target_s: float = 1.0) -> int:
+    return max(2, int(target_s * {"td3bc": 100, "edac": 3}[algo]) // 2 * 2)
+
+
+def run_torch(algos: list[str], reps: int, as_json: bool) -> None:
+    replay = Replay()
+    for algo in algos:
+        step = make(algo)
+        n = torch_updates(algo)
+        time_torch(step, replay, n)  # warm-up
+        t = float(np.median([time_torch(step, replay, n) for _ in range(reps)]))
+        r = {"algo": algo, "phase": "offline_rl", "impl": "torch", "seeds": 1, "updates_per_s": round(1 / t, 2),
+             "torch_threads": torch.get_num_threads(), "torch": torch.__version__,
+             "load1": round(os.getloadavg()[0], 2)}
+        print(json.dumps(r) if as_json else f"{algo:<6} torch {r['updates_per_s']:8.2f} updates/s "
+              f"({r['torch_threads']} threads, load {r['load1']})", flush=True)
+
+
+def compare(algos: list[str], rounds: int) -> None:
+    """JAX (driver chunk function, S = 1) and PyTorch timed alternately, so both see the same background load."""
+    from benchmarks.throughput import CASES, chain_rate, init_states, synthetic_data, time_case
+
+    data = synthetic_data(ROWS)
+    replay = Replay()
+    peak = chain_rate()
+    for algo in algos:
+        case = next(c for c in CASES if c.algo == algo and c.phase == "offline_rl"
+                    and c.config.num_critics == (2 if algo == "td3bc" else 10))
+        states = init_states(case, 1, ROWS)
+        step = make(algo)
+        n = torch_updates(algo)
+        time_torch(step, replay, n)
+        jax_rates, torch_rates = [], []
+        for _ in range(rounds):
+            r = time_case(case, 1, data, states, peak, 0.25 * peak, 1.0, 1, 1e9)
+            jax_rates.append(r["updates_per_s"])
+            torch_rates.append(1 / time_torch(step, replay, n))
+        j, t = float(np.median(jax_rates)), float(np.median(torch_rates))
+        print(json.dumps({"algo": algo, "phase": "offline_rl", "seeds": 1, "jax_updates_per_s": round(j, 2),
+                          "torch_updates_per_s": round(t, 2), "ratio": round(j / t, 2), "rounds": rounds,
+                          "jax_rates": jax_rates, "torch_rates": [round(x, 2) for x in torch_rates],
+                          "torch_threads": torch.get_num_threads(), "load1": round(os.getloadavg()[0], 2)}),
+              flush=True)
+
+
+def main(argv: list[str] | None = None) -> None:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--algo", nargs="*", default=["td3bc", "edac"], choices=["td3bc", "edac"])
+    p.add_argument("--json", action="store_true")
+    p.add_argument("--reps", type=int, default=3)
+    p.add_argument("--compare", action="store_true", help="interleave JAX and PyTorch timings; print the ratio")
+    p.add_argument("--threads", type=int, help="torch.set_num_threads (default: PyTorch's choice)")
+    args = p.parse_args(argv)
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    torch.manual_seed(0)
+    print(f"# torch {torch.__version__}, {torch.get_num_threads()} threads, load {os.getloadavg()}", file=sys.stderr)
+    if args.compare:
+        compare(args.algo, args.reps)
+    else:
+        run_torch(args.algo, args.reps, args.json)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,56 @@
+"""Smoke tests of benchmarks/: the analytic FLOP counter and `benchmarks.throughput --quick` (no timing assertions)."""
+import json
+
+import pytest
+
+from benchmarks.flops import eval_flops, mlp_dims, update_flops
+from offrl_jax.algos import make_config
+
+KEYS = {"algo", "phase", "seeds", "updates_per_s", "compile_s", "gflop_per_update", "achieved_gflops", "peak_gflops",
+        "pct_of_peak"}
+
+
+def test_flop_counts_by_hand():
+    actor = mlp_dims(11, (256, 256), 3)
+    forward = 2 * 256 * (11 * 256 + 256 * 256 + 256 * 3)
+    assert eval_flops(actor, 256) == forward
+    # parameter gradient: forward + weight grads + input grads of every layer but the first
+    assert eval_flops(actor, 256, "params") == 3 * forward - 2 * 256 * 11 * 256
+    bc, _ = update_flops(make_config("bc", "hopper"), "actor_pretrain", 11, 3)
+    assert bc == eval_flops(actor, 256, "params")
+    # TD3+BC: a call is policy_delay (2) critic updates + one actor update; FLOPs are per update
+    td3, count = update_flops(make_config("td3bc", "hopper"), "offline_rl", 11, 3)
+    assert td3 == pytest.approx(count.total / 2)
+    # EDAC's diversity term makes the critic step second order: more than SAC-N at the same N
+    edac, _ = update_flops(make_config("edac", "hopper", num_critics=10), "offline_rl", 11, 3)
+    sacn, _ = update_flops(make_config("sacn", "hopper", num_critics=10), "offline_rl", 11, 3)
+    assert edac > sacn > td3 > bc
+
+
+def test_analytic_flops_match_xla_cost_analysis():
+    from benchmarks.flops import xla_update_flops
+    from offrl_jax.algos import make_algorithm
+
+    config = make_config("bc", "hopper")
+    algo = make_algorithm(config, 11, 3, 1000)
+    (phase,) = algo.phases(1000)
+    analytic, _ = update_flops(config, phase.name, 11, 3)
+    xla = xla_update_flops(algo, phase, 11, 3)
+    assert analytic <= xla <= 1.15 * analytic  # XLA also counts element-wise ops (a few per cent)
+
+
+def test_quick_json(capsys, tmp_path):
+    from benchmarks.throughput import main
+
+    out = tmp_path / "quick.jsonl"
+    results = main(["--json", "--quick", "--out", str(out)])
+    lines = [json.loads(line) for line in capsys.readouterr().out.splitlines() if line.strip()]
+    assert len(lines) == len(results) == 1
+    record = lines[0]
+    assert KEYS <= record.keys()
+    assert record["seeds"] == 1 and record["finite"]
+    for key in ("updates_per_s", "gflop_per_update", "achieved_gflops", "peak_gflops", "pct_of_peak"):
+        assert record[key] > 0
+    written = [json.loads(line) for line in out.read_text().splitlines()]
+    assert "command" in written[0]["meta"] and "date" in written[0]["meta"]
+    assert written[1] == record
