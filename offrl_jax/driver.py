@@ -101,7 +101,7 @@ class Driver:
         self._chunk_fns: dict[tuple[str, int], Callable] = {}
 
     def init(self) -> Any:
-        states = jax.vmap(self.algo.init)(seed_keys(self.seeds, INIT, 0))
+        states = jax.jit(jax.vmap(self.algo.init))(seed_keys(self.seeds, INIT, 0))
         # Targets start equal to params; give every leaf its own buffer so the chunk function can donate them.
         states = jax.tree.map(lambda x: jnp.array(x, copy=True), states)
         return self.shard(states)
