@@ -2,7 +2,9 @@
 
 Default (no arguments): hopper-medium (regenerated from the shipped behaviour policy and cached), TD3+BC with
 actor+critic pre-training (10k updates) vs from scratch, 3 vmapped seeds, 100k updates each, evaluated every 5k
-updates (10 episodes, deterministic policy, D4RL-normalised).  Sized to finish within ~30 minutes on 2 CPU cores.
+updates (10 episodes, deterministic policy, D4RL-normalised).  Measured on 2 CPU cores: ~6 min to generate the
+dataset, ~22 min per variant (XLA keeps about one core busy at these sizes) -- about 50 minutes, not yet the 30 we aim
+for; see RESULTS.md.
 
     python -m experiments.mujoco_medium
     python -m experiments.mujoco_medium --env walker2d --algo edac --updates 50000
