@@ -15,8 +15,12 @@ def build(args):
                       reference="scratch", name=f"ablation-{args.env}-{args.level}-{args.algo}")
 
 
+def make_parser():
+    return parser("experiments.ablation", __doc__)
+
+
 def main(argv=None) -> int:
-    return main_guard(build, parser("experiments.ablation", __doc__), argv)
+    return main_guard(build, make_parser(), argv)
 
 
 if __name__ == "__main__":

@@ -7,7 +7,6 @@ checkpoint.  Bad input -> `error: ...` on stderr, exit 2, no traceback.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import shutil
 import sys

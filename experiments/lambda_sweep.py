@@ -21,10 +21,14 @@ def build(args):
                       name=f"lambda-{args.env}-{args.level}-{args.algo}")
 
 
-def main(argv=None) -> int:
+def make_parser():
     p = parser("experiments.lambda_sweep", __doc__, env="halfcheetah")
     p.add_argument("--lambdas", type=float, nargs="+", default=[0.0, 0.1, 0.5, 1.0])
-    return main_guard(build, p, argv)
+    return p
+
+
+def main(argv=None) -> int:
+    return main_guard(build, make_parser(), argv)
 
 
 if __name__ == "__main__":

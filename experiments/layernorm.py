@@ -28,8 +28,12 @@ def build(args):
     return studies if len(studies) > 1 else studies[0]
 
 
+def make_parser():
+    return parser("experiments.layernorm", __doc__, env=None)
+
+
 def main(argv=None) -> int:
-    return main_guard(build, parser("experiments.layernorm", __doc__, env=None), argv)
+    return main_guard(build, make_parser(), argv)
 
 
 if __name__ == "__main__":

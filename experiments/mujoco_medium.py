@@ -87,8 +87,12 @@ def make_study(env: str, algo: str, level: str, args, extra: dict | None = None,
                  reference=reference, **fields)
 
 
+def make_parser():
+    return parser()
+
+
 def main(argv=None) -> int:
-    return main_guard(build, parser(), argv)
+    return main_guard(build, make_parser(), argv)
 
 
 if __name__ == "__main__":

@@ -21,10 +21,14 @@ def build(args):
                       name=f"qtransformer-{args.env}-{args.level}-{args.algo}")
 
 
-def main(argv=None) -> int:
+def make_parser():
     p = parser("experiments.qtransformer", __doc__)
     p.set_defaults(algo="td3bc")
-    return main_guard(build, p, argv)
+    return p
+
+
+def main(argv=None) -> int:
+    return main_guard(build, make_parser(), argv)
 
 
 if __name__ == "__main__":

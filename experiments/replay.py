@@ -17,11 +17,15 @@ def build(args):
             for level in args.levels]
 
 
-def main(argv=None) -> int:
+def make_parser():
     p = parser("experiments.replay", __doc__)
     p.add_argument("--levels", nargs="+", choices=("medium-replay", "full-replay"),
                    default=["medium-replay", "full-replay"])
-    return main_guard(build, p, argv)
+    return p
+
+
+def main(argv=None) -> int:
+    return main_guard(build, make_parser(), argv)
 
 
 if __name__ == "__main__":

@@ -11,7 +11,6 @@ trajectory order; the max at s' is over the actions the data shows in s'.
 """
 from __future__ import annotations
 
-import argparse
 import json
 
 import numpy as np
