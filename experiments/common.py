@@ -55,6 +55,9 @@ def run_args(parser: argparse.ArgumentParser, updates: int, eval_every: int, see
     g.add_argument("--out", type=Path, default=None, help="output directory (default: runs/<study>/<timestamp>)")
     g.add_argument("--overwrite", action="store_true", help="allow writing into an existing non-empty --out")
     g.add_argument("--resume", type=Path, default=None, help="continue the run saved in this directory")
+    g.add_argument("--parallel", type=positive_int, default=2,
+                   help="variants trained at once, in threads (default %(default)s: one XLA program at these sizes keeps "
+                        "about one CPU core busy); 1 = one after another")
     g.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -108,7 +111,8 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
             study_out = out / study.name if isinstance(built, list) else out
             ds = load_data(study, args)
             print(f"{study.name}: {len(ds):,} transitions of {study.dataset}; writing to {study_out}", file=sys.stderr)
-            summary = run_study(study, study_out, ds, resume=args.resume is not None, progress=not args.no_progress)
+            summary = run_study(study, study_out, ds, resume=args.resume is not None, progress=not args.no_progress,
+                                parallel=args.parallel)
             print_table(summary)
             print(f"results: {study_out}/summary.json, curves.csv, curves.png", file=sys.stderr)
     except (UsageError, DatasetError, ValueError, FileNotFoundError) as e:

@@ -100,3 +100,11 @@ def test_divergence_stops_cleanly_and_keeps_checkpoint(tmp_path, tiny_hdf5):
     assert "seed(s) 0, 1" in result.stderr
     assert (out / "checkpoints" / "actor-only.msgpack").exists()
     assert (out / "curves.csv").exists()
+
+
+def test_parallel_variants_equal_one_after_another(tmp_path, tiny_hdf5):
+    runs = {n: tmp_path / f"parallel{n}" for n in (1, 2)}
+    for n, out in runs.items():
+        cli("--dataset-path", tiny_hdf5, "--out", out, "--parallel", n, *TINY, check=True, timeout=600)
+    assert curves_without_time(runs[1] / "curves.csv") == curves_without_time(runs[2] / "curves.csv")
+    assert [r["variant"] for r in curves_without_time(runs[2] / "curves.csv")][0] == "pretrained"  # study order
