@@ -8,15 +8,14 @@ Default: TD3+BC on halfcheetah-medium (where the paper finds lambda > 0 smooths 
 import sys
 
 from experiments.common import main_guard
-from experiments.mujoco_medium import given, make_study, parser
-from offrl_jax.runner import Variant
+from experiments.mujoco_medium import given, make_study, parser, sweep_variants
 
 
 def build(args):
     extra = {k: v for k, v in given(args).items() if k != "lam"}
-    variants = tuple(Variant.of(f"lambda={lam:g}", args.algo, **({"pretrain": "actor+critic", "lam": lam} | extra))
-                     for lam in args.lambdas)
-    variants += (Variant.of("scratch", args.algo, **({"pretrain": "none"} | extra)),)
+    variants = tuple(v for lam in args.lambdas
+                     for v in sweep_variants(f"lambda={lam:g}", args.algo, {"pretrain": "actor+critic", "lam": lam} | extra))
+    variants += sweep_variants("scratch", args.algo, {"pretrain": "none"} | extra)
     return make_study(args.env, args.algo, args.level, args, variants=variants, reference="scratch",
                       name=f"lambda-{args.env}-{args.level}-{args.algo}")
 

@@ -8,8 +8,7 @@ about 2 hours on 2 CPU cores; pass --env to run one env).
 import sys
 
 from experiments.common import main_guard
-from experiments.mujoco_medium import given, make_study, parser
-from offrl_jax.runner import Variant
+from experiments.mujoco_medium import given, make_study, parser, sweep_variants
 
 COMBOS = {"LN actor+critic": (True, True), "LN actor only": (True, False), "LN critic only": (False, True),
           "no LN": (False, False)}
@@ -20,9 +19,9 @@ def build(args):
     extra = {k: v for k, v in given(args).items() if k not in ("actor_layer_norm", "critic_layer_norm")}
     studies = []
     for env in envs:
-        variants = tuple(Variant.of(label, args.algo, **({"pretrain": "none", "actor_layer_norm": a,
-                                                          "critic_layer_norm": c} | extra))
-                         for label, (a, c) in COMBOS.items())
+        variants = tuple(v for label, (a, c) in COMBOS.items()
+                         for v in sweep_variants(label, args.algo, {"pretrain": "none", "actor_layer_norm": a,
+                                                                    "critic_layer_norm": c} | extra))
         studies.append(make_study(env, args.algo, args.level, args, variants=variants, reference="LN actor+critic",
                                   name=f"layernorm-{env}-{args.level}-{args.algo}"))
     return studies if len(studies) > 1 else studies[0]

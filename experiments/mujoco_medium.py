@@ -41,9 +41,11 @@ def parser(prog: str = "experiments.mujoco_medium", doc: str = __doc__, updates:
     g.add_argument("--lambda-mode", choices=("loss", "target"), default=None)
     g.add_argument("--actor-ln", action=argparse.BooleanOptionalAction, default=None, help="LayerNorm in the actor")
     g.add_argument("--critic-ln", action=argparse.BooleanOptionalAction, default=None, help="LayerNorm in the critic")
-    g.add_argument("--alpha", type=float, default=None, help="TD3+BC alpha (default: per env)")
+    g.add_argument("--alpha", type=float, nargs="+", default=None,
+                   help="TD3+BC alpha (default: per env); several values = a sweep, vmapped in one program")
     g.add_argument("--num-critics", type=int, default=None, help="EDAC/SAC-N ensemble size (default: per env)")
-    g.add_argument("--eta", type=float, default=None, help="EDAC diversity weight")
+    g.add_argument("--eta", type=float, nargs="+", default=None,
+                   help="EDAC diversity weight; several values = a sweep, vmapped in one program")
     g.add_argument("--hidden", type=positive_int, nargs="+", default=None, help="hidden layer widths (default per algo)")
     g.add_argument("--actor-lr", type=float, default=None)
     g.add_argument("--critic-lr", type=float, default=None)
@@ -67,13 +69,30 @@ def build(args) -> Study | list[Study]:
     return make_study(args.env, args.algo, args.level, args)
 
 
+SWEPT = ("alpha", "eta")  # flags that take several values
+
+
 def given(args) -> dict:
-    """The hyper-parameters set on the command line (the rest take the per-env defaults)."""
-    return {k: v for k, v in overrides(args).items() if v is not None}
+    """The hyper-parameters set on the command line (the rest take the per-env defaults); a swept flag given one
+    value is that value, given several it stays a list (see `sweep_variants`)."""
+    values = {k: v for k, v in overrides(args).items() if v is not None}
+    return {k: (v[0] if k in SWEPT and len(v) == 1 else v) for k, v in values.items()}
+
+
+def sweep_variants(label: str, algo: str, fixed: dict) -> tuple[Variant, ...]:
+    """One variant, or one per value of a swept flag (labels "pretrained alpha=2.5", ...); the runner trains a
+    sweep's variants as one vmapped program."""
+    swept = [k for k in SWEPT if isinstance(fixed.get(k), list)]
+    if not swept:
+        return (Variant.of(label, algo, **fixed),)
+    if len(swept) > 1:
+        raise ValueError(f"sweep one hyper-parameter at a time, got several values for {' and '.join(swept)}")
+    name = swept[0]
+    return tuple(Variant.of(f"{label} {name}={value:g}", algo, **(fixed | {name: value})) for value in fixed[name])
 
 
 def pretrain_variants(algo: str, modes, args) -> tuple[Variant, ...]:
-    return tuple(Variant.of(LABELS[mode], algo, **({"pretrain": mode} | given(args))) for mode in modes)
+    return tuple(v for mode in modes for v in sweep_variants(LABELS[mode], algo, {"pretrain": mode} | given(args)))
 
 
 def make_study(env: str, algo: str, level: str, args, extra: dict | None = None,

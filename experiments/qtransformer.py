@@ -8,15 +8,14 @@ Default: hopper-medium, 3 vmapped seeds, 100k updates per variant.
 import sys
 
 from experiments.common import main_guard
-from experiments.mujoco_medium import given, make_study, parser
-from offrl_jax.runner import Variant
+from experiments.mujoco_medium import given, make_study, parser, sweep_variants
 
 
 def build(args):
     extra = given(args)
-    variants = (Variant.of("pretrained", args.algo, **({"pretrain": "actor+critic"} | extra)),
-                Variant.of("max(MC,Q) target", args.algo, **({"pretrain": "none", "target": "max_mc"} | extra)),
-                Variant.of("scratch", args.algo, **({"pretrain": "none"} | extra)))
+    variants = (sweep_variants("pretrained", args.algo, {"pretrain": "actor+critic"} | extra)
+                + sweep_variants("max(MC,Q) target", args.algo, {"pretrain": "none", "target": "max_mc"} | extra)
+                + sweep_variants("scratch", args.algo, {"pretrain": "none"} | extra))
     return make_study(args.env, args.algo, args.level, args, variants=variants, reference="scratch",
                       name=f"qtransformer-{args.env}-{args.level}-{args.algo}")
 

@@ -3,6 +3,11 @@ sampling minibatches on the device inside the scan, for S seeds at once with `ja
 
 Randomness is a pure function of (seed, global update index), so seed i of a vmapped run equals a single run with
 seed i, and a resumed run continues exactly where it stopped.
+
+A hyper-parameter sweep (`Driver(..., sweep=("alpha", (1.0, 2.5, 10.0)))`) runs every (value, seed) pair as one
+member of the same vmapped program: the members' axis is value-major (member j * S + i = value j, seed i), each member
+gets its value as a traced hyper-parameter (`offrl_jax.algos.common.with_hparams`), and member (j, i) equals a
+single run with seed i and value j.
 """
 from __future__ import annotations
 
@@ -46,24 +51,32 @@ def seed_keys(seeds: tuple[int, ...], stream: int, index: int) -> jax.Array:
 INIT, CHUNK, PHASE_START = 0, 1, 2  # key streams
 
 
-def make_chunk_fn(phase: Phase, batch_size: int, num_calls: int) -> Callable:
-    """jit(vmap(scan of `num_calls` update calls)): (states (S..), data, keys (S, 2)) -> (states, metrics (S, ...))."""
+def make_chunk_fn(phase: Phase, batch_size: int, num_calls: int,
+                  phase_for: Callable[[dict[str, jax.Array]], Phase] | None = None) -> Callable:
+    """jit(vmap(scan of `num_calls` update calls)): (states (S..), data, keys (S, 2)) -> (states, metrics (S, ...)).
 
-    def one_seed(state, data, key):
+    With `phase_for` (a sweep: hyper-parameters -> the phase built with them) the function takes a 4th argument,
+    hparams: {name: (S,) values}, and member m runs `phase_for({name: value_m})`.
+    """
+
+    def one_seed(state, data, key, hparams):
+        member_phase = phase if phase_for is None else phase_for(hparams)
         n = data["rewards"].shape[0]
 
         def body(state, key):
             k_idx, k_update = jax.random.split(key)
-            idx = jax.random.randint(k_idx, (phase.updates_per_call, batch_size), 0, n)
+            idx = jax.random.randint(k_idx, (member_phase.updates_per_call, batch_size), 0, n)
             batch = {k: data[k][idx] for k in DATA_FIELDS} | {"idx": idx}
-            return phase.update(state, batch, k_update)
+            return member_phase.update(state, batch, k_update)
 
         state, metrics = jax.lax.scan(body, state, jax.random.split(key, num_calls))
         finite = jnp.all(jnp.stack([jnp.all(jnp.isfinite(m)) for m in jax.tree.leaves(metrics)]))
         finite &= jnp.all(jnp.stack([jnp.all(jnp.isfinite(p)) for p in jax.tree.leaves(state)]))
         return state, jax.tree.map(lambda m: jnp.mean(m, axis=0), metrics) | {"finite": finite}
 
-    return jax.jit(jax.vmap(one_seed, in_axes=(0, None, 0)), donate_argnums=0)
+    if phase_for is None:
+        return jax.jit(jax.vmap(lambda s, d, k: one_seed(s, d, k, None), in_axes=(0, None, 0)), donate_argnums=0)
+    return jax.jit(jax.vmap(one_seed, in_axes=(0, None, 0, 0)), donate_argnums=0)
 
 
 @dataclasses.dataclass
@@ -72,8 +85,8 @@ class Chunk:
 
     phase: str
     update: int  # global updates done (pre-training included)
-    states: Any  # agent states, leading axis S
-    metrics: dict[str, np.ndarray]  # each (S,)
+    states: Any  # agent states, leading axis M = members (S seeds, or values x seeds in a sweep)
+    metrics: dict[str, np.ndarray]  # each (M,)
     seconds: float  # wall-clock seconds of training so far (compilation included, evaluation excluded)
     updates_per_s: float
 
@@ -92,28 +105,44 @@ def seed_sharding(num_seeds: int, devices=None) -> tuple[NamedSharding, NamedSha
     return NamedSharding(mesh, P("seeds")), NamedSharding(mesh, P())
 
 
+def _swept_on_start(phase_for: Callable[[dict[str, jax.Array]], Phase]) -> Callable:
+    return lambda state, data, key, hparams: phase_for(hparams).on_start(state, data, key)
+
+
 class Driver:
     def __init__(self, algo, data: dict[str, jax.Array], seeds: tuple[int, ...], batch_size: int = 256,
-                 devices=None):
-        self.algo, self.seeds, self.batch_size = algo, tuple(seeds), batch_size
-        self.seed_axis, self.replicated = seed_sharding(len(self.seeds), devices)
+                 devices=None, sweep: tuple[str, tuple[float, ...]] | None = None):
+        self.algo, self.seeds, self.batch_size, self.sweep = algo, tuple(seeds), batch_size, sweep
+        values = tuple(sweep[1]) if sweep else (None,)
+        self.members = tuple(s for _ in values for s in self.seeds)  # value-major: member j * S + i
+        self.seed_axis, self.replicated = seed_sharding(len(self.members), devices)
         self.data = jax.device_put(data, self.replicated)  # one copy per device, shared by its seeds
+        self.hparams = None
+        if sweep:
+            per_member = np.repeat(np.asarray(values, np.float32), len(self.seeds))
+            self.hparams = jax.device_put({sweep[0]: jnp.asarray(per_member)}, self.seed_axis)
         self._chunk_fns: dict[tuple[str, int], Callable] = {}
 
     def init(self) -> Any:
-        states = jax.jit(jax.vmap(self.algo.init))(seed_keys(self.seeds, INIT, 0))
+        states = jax.jit(jax.vmap(self.algo.init))(seed_keys(self.members, INIT, 0))
         # Targets start equal to params; give every leaf its own buffer so the chunk function can donate them.
         states = jax.tree.map(lambda x: jnp.array(x, copy=True), states)
         return self.shard(states)
 
     def shard(self, states: Any) -> Any:
-        """Place a seed-batched pytree with its seed axis split over the mesh."""
+        """Place a member-batched pytree with its leading axis split over the mesh."""
         return jax.device_put(states, self.seed_axis)
 
-    def _chunk_fn(self, phase: Phase, num_calls: int) -> Callable:
+    def _phase_for(self, total: int, index: int) -> Callable[[dict[str, jax.Array]], Phase]:
+        """hparams -> phase `index` of the algorithm rebuilt with those (traced) hyper-parameter values."""
+        from offrl_jax.algos.common import with_hparams
+
+        return lambda hparams: with_hparams(self.algo, **hparams).phases(total)[index]
+
+    def _chunk_fn(self, phase: Phase, num_calls: int, phase_for=None) -> Callable:
         key = (phase.name, num_calls)
         if key not in self._chunk_fns:
-            self._chunk_fns[key] = make_chunk_fn(phase, self.batch_size, num_calls)
+            self._chunk_fns[key] = make_chunk_fn(phase, self.batch_size, num_calls, phase_for)
         return self._chunk_fns[key]
 
     def run(self, phases: list[Phase], chunk_updates: int, states: Any = None, start_update: int = 0,
@@ -123,23 +152,27 @@ class Driver:
         `states`/`start_update`/`seconds` resume a run from a checkpoint taken at a chunk boundary.
         """
         states = self.init() if states is None else self.shard(states)
+        total = sum(p.steps for p in phases)
+        extra = () if self.hparams is None else (self.hparams,)
         phase_start = 0
         for index, phase in enumerate(phases):
             phase_end = phase_start + phase.steps
             if start_update >= phase_end:
                 phase_start = phase_end
                 continue
+            phase_for = None if self.hparams is None else self._phase_for(total, index)
             if phase.on_start is not None and start_update == phase_start:
-                hook = jax.jit(jax.vmap(phase.on_start, in_axes=(0, None, 0)))
-                states = hook(states, self.data, jax.device_put(seed_keys(self.seeds, PHASE_START, index),
-                                                                self.seed_axis))
+                hook = jax.jit(jax.vmap(phase.on_start, in_axes=(0, None, 0)) if phase_for is None else
+                               jax.vmap(_swept_on_start(phase_for), in_axes=(0, None, 0, 0)))
+                states = hook(states, self.data, jax.device_put(seed_keys(self.members, PHASE_START, index),
+                                                                self.seed_axis), *extra)
             update = max(start_update, phase_start)
             while update < phase_end:
                 n = min(chunk_updates - update % chunk_updates, phase_end - update)  # align chunks globally
                 calls = max(1, n // phase.updates_per_call)
                 tic = time.perf_counter()
-                keys = jax.device_put(seed_keys(self.seeds, CHUNK, update), self.seed_axis)
-                states, metrics = self._chunk_fn(phase, calls)(states, self.data, keys)
+                keys = jax.device_put(seed_keys(self.members, CHUNK, update), self.seed_axis)
+                states, metrics = self._chunk_fn(phase, calls, phase_for)(states, self.data, keys, *extra)
                 metrics = jax.tree.map(np.asarray, metrics)
                 elapsed = time.perf_counter() - tic
                 seconds += elapsed

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 from tqdm.auto import tqdm
 
-from offrl_jax.algos import make_algorithm, make_config
+from offrl_jax.algos import ALGOS, make_algorithm, make_config
 from offrl_jax.checkpoint import atomic_write_bytes, atomic_write_text, load_checkpoint, save_checkpoint
 from offrl_jax.data.dataset import Dataset
 from offrl_jax.driver import Driver, device_data
@@ -63,6 +63,7 @@ class Study:
     transitions: int | None = None  # cap the dataset size (quick runs, tests)
     reference: str | None = None  # label of the from-scratch variant whose final score is the asymptote
     final_window: tuple[int, int] | None = None  # final score = mean of evaluations in [lo, hi] (Adroit protocol)
+    vmap_sweeps: bool = True  # variants differing only in one sweepable value (e.g. alpha) share one vmapped program
 
     def __post_init__(self):
         for name in ("updates", "eval_every", "eval_episodes", "batch_size"):
@@ -96,7 +97,8 @@ def run_study(study: Study, out_dir: Path, dataset: Dataset, resume: bool = Fals
               parallel: int = 1) -> list[dict]:
     """Run (or resume) every variant; write results as it goes; return the summary.
 
-    `parallel` > 1 runs that many variants at once in threads.  A jitted chunk releases the GIL, and at these network
+    Variants that differ only in one sweepable hyper-parameter (`sweep_groups`) train as one vmapped program unless
+    `study.vmap_sweeps` is off.  `parallel` > 1 runs that many variants (or groups) at once in threads.  A jitted chunk releases the GIL, and at these network
     sizes one XLA program keeps only about one CPU core busy, so two variants at once use a 2-core machine better.
     Results do not depend on it (every variant's randomness is its own).
     """
@@ -107,17 +109,19 @@ def run_study(study: Study, out_dir: Path, dataset: Dataset, resume: bool = Fals
                file=sys.stderr)
     recorder = _Recorder(out_dir / "curves.csv", [v.label for v in study.variants])
     pretrain_ends: dict[str, int] = {}
+    groups = sweep_groups(study.variants) if study.vmap_sweeps else [((v,), None) for v in study.variants]
 
-    def run(variant: Variant) -> None:
-        pretrain_ends[variant.label] = _run_variant(study, variant, dataset, out_dir, resume, bar, recorder)
+    def run(group: tuple[tuple[Variant, ...], str | None]) -> None:
+        end = _run_group(study, *group, dataset, out_dir, resume, bar, recorder)
+        pretrain_ends.update({v.label: end for v in group[0]})
 
     try:
-        if parallel <= 1 or len(study.variants) == 1:
-            for variant in study.variants:
-                run(variant)
+        if parallel <= 1 or len(groups) == 1:
+            for group in groups:
+                run(group)
         else:
             with ThreadPoolExecutor(max_workers=parallel) as pool:
-                futures = [pool.submit(run, v) for v in study.variants]
+                futures = [pool.submit(run, g) for g in groups]
                 try:
                     for future in futures:
                         future.result()
@@ -153,63 +157,101 @@ class _Recorder:
         return [row for rows in self.rows.values() for row in rows]
 
 
-def _run_variant(study: Study, variant: Variant, ds: Dataset, out_dir: Path, resume: bool, bar,
-                 recorder: _Recorder) -> int:
-    """Train one variant (S vmapped seeds), evaluating between chunks; returns its number of pre-training updates."""
-    config = make_config(variant.algo, study.env, study.dataset, **dict(variant.overrides))
+def sweep_groups(variants: tuple[Variant, ...]) -> list[tuple[tuple[Variant, ...], str | None]]:
+    """Variants of one algorithm whose overrides differ only in one sweepable hyper-parameter (`SWEEPABLE`, e.g.
+    TD3+BC's alpha) run as one vmapped program: [(variants, swept name or None)], in study order of first member."""
+    groups: list[tuple[list[Variant], list[str | None]]] = []
+    for v in variants:
+        for members, name in groups:
+            key = _swept_name(members[0], v)
+            if key is not None and name[0] in (None, key):
+                members.append(v)
+                name[0] = key
+                break
+        else:
+            groups.append(([v], [None]))
+    return [(tuple(members), name[0]) for members, name in groups]
+
+
+def _swept_name(a: Variant, b: Variant) -> str | None:
+    if a.algo != b.algo:
+        return None
+    da, db = dict(a.overrides), dict(b.overrides)
+    diff = [k for k in sorted(da.keys() | db.keys()) if da.get(k) != db.get(k)]
+    if len(diff) != 1 or diff[0] not in da or diff[0] not in db:
+        return None
+    sweepable = ALGOS[a.algo][0].SWEEPABLE
+    return diff[0] if diff[0] in sweepable and all(isinstance(d[diff[0]], (int, float)) for d in (da, db)) else None
+
+
+def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: Dataset, out_dir: Path, resume: bool,
+               bar, recorder: _Recorder) -> int:
+    """Train one variant (S vmapped seeds), or a sweep group (values x seeds in one vmapped program), evaluating
+    between chunks; returns the number of pre-training updates."""
+    first_variant, labels, seeds = group[0], [v.label for v in group], study.seeds
+    config = make_config(first_variant.algo, study.env, study.dataset, **dict(first_variant.overrides))
     algo = make_algorithm(config, ds.obs_dim, ds.act_dim, len(ds))
     data, (obs_mean, obs_std) = device_data(ds, config.gamma)
-    driver = Driver(algo, data, study.seeds, study.batch_size)
+    sweep = (swept, tuple(float(dict(v.overrides)[swept]) for v in group)) if swept else None
+    driver = Driver(algo, data, seeds, study.batch_size, sweep=sweep)
     policy = make_policy(algo.act, obs_mean, obs_std)
     phases = algo.phases(study.updates)
     pretrain_end = sum(p.steps for p in phases if p.name != "offline_rl")
-    ckpt_path = out_dir / "checkpoints" / f"{variant.label}.msgpack"
+    name = " + ".join(labels)
+    ckpt_path = out_dir / "checkpoints" / f"{'+'.join(labels)}.msgpack"
     states, start, seconds, rows = None, 0, 0.0, []
+
+    def record():
+        for label in labels:
+            recorder.set(label, [r for r in rows if r["variant"] == label])
+
     if resume and ckpt_path.exists():
         states, start, seconds, rows = load_checkpoint(ckpt_path, driver.init())
-        recorder.set(variant.label, rows)
-    bar.update(start)
+        record()
+    bar.update(start * len(group))
     if start >= study.updates:
         return pretrain_end
     every = study.checkpoint_every or study.eval_every
     last_saved = start
-    alive = np.ones(len(study.seeds), bool)
+    alive = np.ones(len(driver.members), bool)
+    member_names = [(v, seed) for v in group for seed in seeds]  # member j * S + i = (variant j, seed i)
     for chunk in driver.run(phases, study.eval_every, states, start, seconds):
         if recorder.stop.is_set():
-            raise Stopped(f"{variant.label} stopped at update {start}; last checkpoint: update {last_saved}")
+            raise Stopped(f"{name} stopped at update {start}; last checkpoint: update {last_saved}")
         finite = np.asarray(chunk.metrics.pop("finite"), bool)
         if not finite.all():
-            newly = [s for s, ok, a in zip(study.seeds, finite, alive) if a and not ok]
+            newly = [f"{v.label}/seed {s}" if swept else str(s)
+                     for (v, s), ok, a in zip(member_names, finite, alive) if a and not ok]
             alive &= finite
             if newly:
-                tqdm.write(f"diverged: {variant.algo} ({variant.label}), phase {chunk.phase}, seed(s) "
-                           f"{', '.join(map(str, newly))}, by update {chunk.update}", file=sys.stderr)
+                tqdm.write(f"diverged: {first_variant.algo} ({name}), phase {chunk.phase}, seed(s) "
+                           f"{', '.join(newly)}, by update {chunk.update}", file=sys.stderr)
             if not alive.any():
-                recorder.set(variant.label, rows)
-                raise Diverged(f"{variant.algo} ({variant.label}) diverged in phase {chunk.phase} for every seed by "
+                record()
+                raise Diverged(f"{first_variant.algo} ({name}) diverged in phase {chunk.phase} for every seed by "
                                f"update {chunk.update}; last good checkpoint: update {last_saved} in {ckpt_path}")
         tic = time.perf_counter()
         scores = evaluate_normalized(policy, chunk.states, study.env, study.eval_episodes).mean(axis=1)
         scores[~alive] = np.nan
-        rows += _rows(variant, study.seeds, chunk, scores)
-        bar.update(chunk.update - start)
+        rows += _rows(member_names, chunk, scores)
+        bar.update((chunk.update - start) * len(group))
         start = chunk.update
         mean_score = float(np.nanmean(scores)) if alive.any() else float("nan")
-        bar.set_postfix_str(f"{variant.label} | {chunk.phase} | {chunk.updates_per_s:.0f} upd/s | score "
+        bar.set_postfix_str(f"{name} | {chunk.phase} | {chunk.updates_per_s:.0f} upd/s | score "
                             f"{mean_score:.1f} | eval {time.perf_counter() - tic:.1f}s")
         if alive.all() and (chunk.update - last_saved >= every or chunk.update == study.updates):
             save_checkpoint(ckpt_path, chunk.states, chunk.update, chunk.seconds, rows)
             last_saved = chunk.update
-        recorder.set(variant.label, rows)
+        record()
     return pretrain_end
 
 
-def _rows(variant: Variant, seeds: tuple[int, ...], chunk, scores: np.ndarray) -> list[dict]:
+def _rows(members: list[tuple[Variant, int]], chunk, scores: np.ndarray) -> list[dict]:
     return [
         {"variant": variant.label, "algo": variant.algo, "seed": seed, "phase": chunk.phase, "update": chunk.update,
-         "seconds": round(chunk.seconds, 3), "score": float(scores[i])}
-        | {name: float(np.asarray(value)[i]) for name, value in sorted(chunk.metrics.items())}
-        for i, seed in enumerate(seeds)
+         "seconds": round(chunk.seconds, 3), "score": float(scores[m])}
+        | {name: float(np.asarray(value)[m]) for name, value in sorted(chunk.metrics.items())}
+        for m, (variant, seed) in enumerate(members)
     ]
 
 

@@ -54,3 +54,31 @@ def test_edac_soft_pretraining_computes_per_seed_soft_returns(tiny_dataset):
     hard, _ = device_data(tiny_dataset, 0.99)
     assert not np.allclose(soft[0], np.asarray(hard["returns"]))  # the entropy bonus is in there
     assert "diversity" in chunks[1].metrics and "mc_error" in chunks[1].metrics
+
+
+@pytest.mark.parametrize("algo_name, name, values, kw", [
+    ("td3bc", "alpha", (1.0, 10.0), dict(pretrain="actor+critic", pretrain_updates=100, hidden=(32, 32))),
+    ("edac", "eta", (0.0, 5.0), dict(pretrain="actor+critic", pretrain_updates=100, num_critics=3, hidden=(32, 32))),
+])
+def test_vmapped_sweep_member_equals_single_run(tiny_dataset, algo_name, name, values, kw):
+    """Member (value j, seed i) of a swept program equals a run with seed i and that value (the soft-return hook
+    and the offline-RL phase included)."""
+    config = make_config(algo_name, tiny_dataset.env, **kw, **{name: values[0]})
+    algo = make_algorithm(config, tiny_dataset.obs_dim, tiny_dataset.act_dim, len(tiny_dataset))
+    data, _ = device_data(tiny_dataset, config.gamma)
+    driver = Driver(algo, data, (0, 1), batch_size=32, sweep=(name, values))
+    swept = list(driver.run(algo.phases(200), 100))
+    assert swept[-1].metrics["finite"].shape == (4,)
+    _, single = run(tiny_dataset, algo_name, (1,), total=200, **kw, **{name: values[1]})
+    for a, b in zip(swept, single):
+        for metric in b.metrics:
+            np.testing.assert_allclose(a.metrics[metric][3], b.metrics[metric][0], rtol=1e-4, atol=1e-5, err_msg=metric)
+    assert not np.allclose(swept[-1].metrics["actor_loss"][1], swept[-1].metrics["actor_loss"][3])  # values differ
+
+
+def test_unsweepable_field_is_refused(tiny_dataset):
+    from offrl_jax.algos.common import with_hparams
+
+    algo = make_algorithm(make_config("td3bc", "hopper"), 11, 3, 10)
+    with pytest.raises(ValueError, match="'hidden' cannot be swept"):
+        with_hparams(algo, hidden=(3,))

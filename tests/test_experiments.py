@@ -108,3 +108,22 @@ def test_parallel_variants_equal_one_after_another(tmp_path, tiny_hdf5):
         cli("--dataset-path", tiny_hdf5, "--out", out, "--parallel", n, *TINY, check=True, timeout=600)
     assert curves_without_time(runs[1] / "curves.csv") == curves_without_time(runs[2] / "curves.csv")
     assert [r["variant"] for r in curves_without_time(runs[2] / "curves.csv")][0] == "pretrained"  # study order
+
+
+def test_vmapped_alpha_sweep_equals_separate_runs(tmp_path, tiny_dataset):
+    import dataclasses
+
+    from offrl_jax.runner import Study, Variant, run_study
+
+    variants = tuple(Variant.of(f"alpha={a:g}", "td3bc", pretrain="none", alpha=a, hidden=(32, 32)) for a in (1.0, 10.0))
+    study = Study(name="sweep", dataset="synthetic", env="hopper", variants=variants, seeds=(0, 1), updates=200,
+                  eval_every=100, eval_episodes=1, batch_size=32)
+    together = run_study(study, tmp_path / "together", tiny_dataset, progress=False)
+    apart = run_study(dataclasses.replace(study, vmap_sweeps=False), tmp_path / "apart", tiny_dataset, progress=False)
+    rows = [curves_without_time(tmp_path / d / "curves.csv") for d in ("together", "apart")]
+    assert [(r["variant"], r["seed"], r["update"]) for r in rows[0]] == [(r["variant"], r["seed"], r["update"])
+                                                                         for r in rows[1]]
+    for a, b in zip(*rows):
+        for key in ("score", "critic_loss", "actor_loss", "q_mean"):
+            assert abs(float(a[key]) - float(b[key])) <= 1e-3 * (1 + abs(float(b[key]))), (key, a, b)
+    assert [s["final_score_mean"] for s in together] == pytest.approx([s["final_score_mean"] for s in apart], abs=0.5)

@@ -49,3 +49,16 @@ def test_preset_paper():
 def test_qtransformer_target_is_td3bc_only(algo):
     with pytest.raises(ValueError, match="not a hyper-parameter"):
         build(qtransformer, ["--algo", algo])
+
+
+def test_alpha_sweep_builds_one_variant_per_value_and_groups_them():
+    from offrl_jax.runner import sweep_groups
+
+    (study,) = build(mujoco_medium, ["--alpha", "1", "2.5", "10"])
+    assert labels(study) == [f"{p} alpha={a}" for p in ("pretrained", "scratch") for a in ("1", "2.5", "10")]
+    groups = sweep_groups(study.variants)
+    assert [(len(g), name) for g, name in groups] == [(3, "alpha"), (3, "alpha")]
+    lam = build(lambda_sweep, [])[0]  # lambda is not sweepable in one program (it switches code paths)
+    assert all(name is None for _, name in sweep_groups(lam.variants))
+    with pytest.raises(ValueError, match="sweep one hyper-parameter at a time"):
+        build(mujoco_medium, ["--alpha", "1", "2", "--eta", "1", "2"])

@@ -10,6 +10,7 @@ k = `Phase.updates_per_call` minibatches (k = 2 for TD3's delayed actor update).
 """
 from __future__ import annotations
 
+import copy
 import dataclasses
 from typing import Any, Callable
 
@@ -55,6 +56,22 @@ class Phase:
     updates_per_call: int = 1
     # Called once (jitted, vmapped over seeds) before the phase starts: (state, data, key) -> state.
     on_start: Callable[[Any, Batch, jax.Array], Any] | None = None
+
+
+def with_hparams(algo: Any, **values: Any) -> Any:
+    """A shallow copy of `algo` whose config holds `values` (traced, in a vmapped sweep) instead of its own.
+
+    Only the config's `SWEEPABLE` fields may be swept: they enter the losses as plain arithmetic (never a Python `if`
+    or a shape), so a traced value computes exactly what the concrete value would.
+    """
+    cfg = copy.copy(algo.cfg)
+    for name, value in values.items():
+        if name not in type(cfg).SWEEPABLE:
+            raise ValueError(f"'{name}' cannot be swept in one program; sweepable: {', '.join(type(cfg).SWEEPABLE)}")
+        object.__setattr__(cfg, name, value)  # frozen dataclass: bypass __setattr__ (and validation of a tracer)
+    new = copy.copy(algo)
+    new.cfg = cfg
+    return new
 
 
 def first(batch: Batch, i: int = 0) -> Batch:

@@ -12,7 +12,7 @@ with alpha carried over.  `actor+critic` runs both phases in that order (the pap
 from __future__ import annotations
 
 import dataclasses
-from typing import Literal
+from typing import ClassVar, Literal
 
 import jax
 import jax.numpy as jnp
@@ -62,6 +62,8 @@ class EDACConfig:
     lam: float = 0.0
     lambda_mode: Literal["loss", "target"] = "loss"
     entropy_batch: int = 16_384  # rows per batch when computing the per-state entropies for the soft returns
+
+    SWEEPABLE: ClassVar[tuple[str, ...]] = ("eta", "tau")  # vmappable in one program (see common.with_hparams)
 
     def __post_init__(self):
         validate_common(self)
@@ -162,7 +164,7 @@ class EDAC:
         """
         actions = jnp.broadcast_to(batch["actions"], (self.cfg.num_critics, *batch["actions"].shape))
         q, vjp = jax.vjp(lambda a: self.critic_per_member.apply(params, batch["observations"], a), actions)
-        if self.cfg.eta == 0:
+        if isinstance(self.cfg.eta, (int, float)) and self.cfg.eta == 0:  # SAC-N; a swept (traced) eta computes it
             return q, jnp.zeros(())
         (grads,) = vjp(jnp.ones_like(q))
         return q, L.edac_diversity_loss(grads)

@@ -11,7 +11,7 @@ at once on the same minibatch, target networks Polyak-updated throughout.
 from __future__ import annotations
 
 import dataclasses
-from typing import Literal
+from typing import ClassVar, Literal
 
 import jax
 import jax.numpy as jnp
@@ -64,6 +64,8 @@ class TD3BCConfig:
     lambda_mode: Literal["loss", "target"] = "loss"  # authors' normalised-loss mixing, or eq. 5 target mixing
     target: Literal["td", "max_mc"] = "td"  # offline-RL critic target; max_mc = Q-Transformer's max(MC, TD)
     bc_only: bool = False  # the BC baseline: actor pre-training for the whole budget
+
+    SWEEPABLE: ClassVar[tuple[str, ...]] = ("alpha", "tau", "policy_noise", "noise_clip")  # vmappable (see with_hparams)
 
     def __post_init__(self):
         validate_common(self)
