@@ -303,6 +303,7 @@ def summarize(study: Study, rows: list[dict], pretrain_ends: dict[str, int]) -> 
         finals[v.label] = np.nanmean(scores[:, keep], axis=1) if keep.any() else np.full(len(study.seeds), np.nan)
     reference = study.reference or study.variants[-1].label
     asymptote = float(np.nanmean(finals[reference])) if reference in finals else float("nan")
+    trend = _trend(np.nanmean(score_matrix(rows, reference)[2], axis=0)) if reference in finals else None
     summary = []
     for v in study.variants:
         updates, seconds, scores = score_matrix(rows, v.label)
@@ -314,12 +315,22 @@ def summarize(study: Study, rows: list[dict], pretrain_ends: dict[str, int]) -> 
             "final_score_mean": float(np.nanmean(finals[v.label])), "final_score_ci95": ci95(finals[v.label]),
             "final_score_std": float(np.nanstd(finals[v.label], ddof=1)) if len(study.seeds) > 1 else 0.0,
             "asymptote": asymptote,
+            # seed-mean of the reference over its last 20 % of evaluations minus the 20 % before: far from 0 means
+            # the "asymptote" is not one yet (the budget ended while the reference was still moving)
+            "asymptote_trend": trend,
             "updates_to_90pct": int(updates[reached[0]]) if len(reached) else None,
             "seconds_to_90pct": float(seconds[reached[0]]) if len(reached) else None,
             "pretrain_updates": pretrain_ends.get(v.label, 0),
             "overrides": dict(v.overrides),
         })
     return summary
+
+
+def _trend(curve: np.ndarray) -> float | None:
+    k = max(1, int(round(0.2 * len(curve))))
+    if len(curve) < 2 * k or not np.isfinite(curve[-2 * k:]).any():
+        return None
+    return float(np.nanmean(curve[-k:]) - np.nanmean(curve[-2 * k:-k]))
 
 
 def plot_curves(path: Path, study: Study, rows: list[dict], pretrain_ends: dict[str, int]) -> None:

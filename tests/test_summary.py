@@ -1,0 +1,28 @@
+"""summary.json's numbers from hand-made curves: final score, asymptote, its trend, updates/seconds to 90 %."""
+import pytest
+
+from offrl_jax.runner import Study, Variant, summarize
+
+
+def rows_of(label, curve_per_seed, every=1000):
+    return [{"variant": label, "seed": seed, "update": (j + 1) * every, "seconds": 10.0 * (j + 1), "score": score}
+            for seed, curve in enumerate(curve_per_seed) for j, score in enumerate(curve)]
+
+
+def test_summary_numbers_by_hand():
+    study = Study(name="t", dataset="hopper-medium", env="hopper", seeds=(0, 1), updates=10_000, eval_every=1000,
+                  variants=(Variant.of("pretrained", "td3bc"), Variant.of("scratch", "td3bc", pretrain="none")),
+                  reference="scratch")
+    scratch = [[10, 20, 30, 40, 50, 60, 70, 80, 90, 100], [10, 20, 30, 40, 50, 60, 70, 80, 90, 100]]
+    pretrained = [[50, 95, 90, 90, 90, 90, 90, 90, 90, 80], [50, 85, 90, 90, 90, 90, 90, 90, 90, 100]]
+    summary = {s["variant"]: s for s in summarize(study, rows_of("pretrained", pretrained) + rows_of("scratch", scratch),
+                                                  {"pretrained": 1000})}
+    # final = mean of the last 10 % of evaluations (1 of 10) per seed, then over seeds
+    assert summary["scratch"]["final_score_mean"] == 100 and summary["pretrained"]["final_score_mean"] == 90
+    assert summary["pretrained"]["asymptote"] == 100
+    # first evaluation whose seed-mean >= 90: pretrained at 2000 updates (mean 90), scratch at 9000
+    assert summary["pretrained"]["updates_to_90pct"] == 2000 and summary["pretrained"]["seconds_to_90pct"] == 20.0
+    assert summary["scratch"]["updates_to_90pct"] == 9000
+    # the reference still climbs: last 20 % (95) minus the 20 % before (75)
+    assert summary["scratch"]["asymptote_trend"] == pytest.approx(20.0)
+    assert summary["pretrained"]["pretrain_updates"] == 1000 and summary["scratch"]["pretrain"] == "none"
