@@ -26,3 +26,20 @@ def test_summary_numbers_by_hand():
     # the reference still climbs: last 20 % (95) minus the 20 % before (75)
     assert summary["scratch"]["asymptote_trend"] == pytest.approx(20.0)
     assert summary["pretrained"]["pretrain_updates"] == 1000 and summary["scratch"]["pretrain"] == "none"
+
+
+def test_report_renders_summary_and_rejects_missing_dir(tmp_path, capsys):
+    import json
+
+    from experiments import report
+
+    study = Study(name="t", dataset="hopper-medium", env="hopper", seeds=(0, 1), updates=2000, eval_every=1000,
+                  variants=(Variant.of("scratch", "td3bc", pretrain="none"),), reference="scratch")
+    (tmp_path / "run").mkdir()
+    (tmp_path / "run" / "summary.json").write_text(json.dumps(summarize(study, rows_of("scratch", [[10, 20], [30, 40]]),
+                                                                         {})))
+    assert report.main([str(tmp_path / "run")]) == 0
+    out = capsys.readouterr().out
+    assert "| scratch | 30.0 ± " in out and "asymptote (from-scratch final) 30.0" in out
+    assert report.main([str(tmp_path / "missing")]) == 2
+    assert capsys.readouterr().err.startswith("error: ")

@@ -1,0 +1,58 @@
+"""Markdown tables from finished runs' summary.json files (what RESULTS.md quotes).
+
+    python -m experiments.report results/mujoco_medium/default results/figure2/*/
+
+One table per run directory: variant, final score (mean ± 95 % CI over seeds), updates and seconds to 90 % of the
+from-scratch asymptote, with the asymptote and its trend (see `offrl_jax.runner.summarize`).  A directory holding
+several studies (sub-directories with a summary.json each) gives one table per study.
+"""
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+from experiments.common import OneLineParser
+
+
+def summaries(path: Path) -> list[Path]:
+    if (path / "summary.json").exists():
+        return [path / "summary.json"]
+    found = sorted(path.glob("*/summary.json"))
+    if not found:
+        raise FileNotFoundError(f"{path}: no summary.json here or in its sub-directories")
+    return found
+
+
+def table(summary: list[dict]) -> str:
+    first = summary[0]
+    trend = first.get("asymptote_trend")
+    head = (f"{first['dataset']}, {len(first['seeds'])} seeds, {first['updates']:,} updates per variant; asymptote "
+            f"(from-scratch final) {first['asymptote']:.1f}"
+            + (f", its trend over the last 20 % of evaluations {trend:+.1f}" if trend is not None else ""))
+    lines = [head, "", "| variant | final score | updates to 90 % | seconds to 90 % | pre-training updates |",
+             "|---|--:|--:|--:|--:|"]
+    for s in summary:
+        u = "never" if s["updates_to_90pct"] is None else f"{s['updates_to_90pct']:,}"
+        t = "never" if s["seconds_to_90pct"] is None else f"{s['seconds_to_90pct']:.0f}"
+        lines.append(f"| {s['variant']} | {s['final_score_mean']:.1f} ± {s['final_score_ci95']:.1f} | {u} | {t} | "
+                     f"{s['pretrain_updates']:,} |")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    p = OneLineParser(prog="experiments.report", description=__doc__)
+    p.add_argument("dirs", nargs="+", type=Path, help="run directories (or directories of studies)")
+    args = p.parse_args(argv)
+    try:
+        for d in args.dirs:
+            for path in summaries(d):
+                print(f"### {path.parent}\n\n{table(json.loads(path.read_text()))}\n")
+    except (FileNotFoundError, json.JSONDecodeError, KeyError, IndexError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
