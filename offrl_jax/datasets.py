@@ -20,7 +20,7 @@ import warnings
 from pathlib import Path
 
 
-from offrl_jax.data.dataset import Dataset, DatasetError, cache_dir
+from offrl_jax.data.dataset import Dataset, DatasetError, dataset_dir
 from offrl_jax.data.readers import load_dataset_path, minari_root, read_door_npz, read_minari
 from offrl_jax.envs import get_env_spec, normalized_score
 
@@ -56,8 +56,8 @@ def door_human_path() -> Path:
 
 
 def cached_path(name: str) -> Path:
-    """Where a generated dataset is cached (a Minari dataset directory)."""
-    return cache_dir() / "datasets" / name
+    """Where a generated dataset is cached (a Minari dataset directory, `<cache>/datasets/<name>-v0`)."""
+    return dataset_dir(name)
 
 
 def is_cached(name: str) -> bool:

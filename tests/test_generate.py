@@ -121,3 +121,19 @@ def test_generate_hopper_medium_minari(tmp_path, monkeypatch):
     assert info["stats"]["transitions"] == 2000
     with pytest.raises(FileExistsError):
         generate("hopper-medium", transitions=2000, out_dir=out, progress=False)
+
+
+@needs_medium
+def test_default_cache_dir_is_a_minari_id_that_minari_lists(tmp_path, monkeypatch):
+    import minari
+
+    from offrl_jax.data.dataset import dataset_dir
+
+    monkeypatch.setenv("OFFRL_JAX_CACHE", str(tmp_path))
+    out = generate("hopper-medium", transitions=1000, progress=False, num_envs=2)
+    assert out == tmp_path / "datasets" / "hopper-medium-v0" == dataset_dir("hopper-medium")
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "datasets"))
+    assert "hopper-medium-v0" in minari.list_local_datasets()
+    assert minari.load_dataset("hopper-medium-v0").total_steps == 1000
+    out.rename(tmp_path / "datasets" / "hopper-medium")  # a cache from before the -v0 suffix is moved, not redone
+    assert dataset_dir("hopper-medium") == out and (out / "data" / "metadata.json").is_file()

@@ -84,3 +84,16 @@ def cache_dir() -> Path:
         return Path(os.environ["OFFRL_JAX_CACHE"])
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
     return Path(base) / "offrl_jax"
+
+
+def dataset_dir(name: str) -> Path:
+    """The cached Minari directory of generated dataset `name`: cache_dir()/datasets/<name>-v0.
+
+    The `-v0` suffix is Minari's id convention, so `MINARI_DATASETS_PATH=<cache>/datasets minari list local` and
+    `minari.load_dataset("hopper-medium-v0")` see our datasets.  A directory from before the suffix is renamed.
+    """
+    root = cache_dir() / "datasets"
+    path, legacy = root / f"{name}-v0", root / name
+    if not path.exists() and (legacy / "data" / "metadata.json").is_file():
+        legacy.rename(path)
+    return path

@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from offrl_jax.data.dataset import Dataset, cache_dir
+from offrl_jax.data.dataset import Dataset, cache_dir, dataset_dir
 from offrl_jax.data.generate.collect import (
     MEDIUM_TARGET_SCORE,
     POLICY_DIR,
@@ -64,8 +64,8 @@ def parse_name(name: str) -> tuple[str, str]:
 
 
 def default_dir(name: str) -> Path:
-    """Where `generate(name)` writes by default: cache_dir()/"datasets"/<name>."""
-    return cache_dir() / "datasets" / name
+    """Where `generate(name)` writes by default: cache_dir()/"datasets"/<name>-v0 (`dataset_dir`)."""
+    return dataset_dir(name)
 
 
 def sac_run_dir(env: str, sac_seed: int = 0) -> Path:
@@ -197,7 +197,7 @@ def generate(name: str, transitions: int | None = None, out_dir: str | Path | No
     """Generate dataset `name` (e.g. "hopper-medium") and write it with minari; returns its directory.
 
     transitions: cap on the number of rows (default 1M per policy; the replay levels default to the whole run).
-    out_dir: the dataset directory (default `cache_dir()/"datasets"/name`); an existing one raises unless overwrite.
+    out_dir: the dataset directory (default `dataset_dir(name)`: `cache_dir()/"datasets"/<name>-v0`); an existing one raises unless overwrite.
     seed: env / action-noise seed of the rollouts.  sac_run: SAC run directory for the replay levels.
     """
     if name == "door-cloned":

@@ -33,7 +33,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from offrl_jax.data.dataset import ARRAY_FIELDS, Dataset, cache_dir
+from offrl_jax.data.dataset import ARRAY_FIELDS, Dataset, dataset_dir
 
 NAME = "door-cloned"
 DEFAULT_TRANSITIONS = 1_000_000
@@ -203,7 +203,7 @@ def generate_door_cloned(transitions: int | None = DEFAULT_TRANSITIONS, out_dir:
                          bc_updates: int = DEFAULT_BC_UPDATES, noise_std: float = DEFAULT_NOISE_STD,
                          num_envs: int = 16) -> Path:
     """Generate door-cloned (`transitions` rows, half BC rollouts, half demonstrations) in Minari format; returns its
-    directory (default `cache_dir()/"datasets"/"door-cloned"`; an existing one raises unless overwrite)."""
+    directory (default `dataset_dir("door-cloned")`; an existing one raises unless overwrite)."""
     import flax.serialization
 
     from offrl_jax.data.generate import write_minari
@@ -211,7 +211,7 @@ def generate_door_cloned(transitions: int | None = DEFAULT_TRANSITIONS, out_dir:
     from offrl_jax.envs import get_env_spec
 
     transitions = int(transitions or DEFAULT_TRANSITIONS)
-    out = Path(out_dir) if out_dir is not None else cache_dir() / "datasets" / NAME
+    out = Path(out_dir) if out_dir is not None else dataset_dir(NAME)
     if out.exists() and not overwrite:
         raise FileExistsError(f"{out} exists; pass overwrite=True to replace it")
     t0 = time.time()
