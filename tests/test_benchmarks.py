@@ -54,3 +54,14 @@ def test_quick_json(capsys, tmp_path):
     written = [json.loads(line) for line in out.read_text().splitlines()]
     assert "command" in written[0]["meta"] and "date" in written[0]["meta"]
     assert written[1] == record
+
+
+@pytest.mark.slow  # two fresh JAX processes: ~1 min idle, several under load
+def test_memory_json_dataset_is_shared_by_seeds(capsys):
+    from benchmarks.memory import main
+
+    assert main(["--algos", "td3bc", "--seeds", "1", "2", "--transitions", "3000", "--json"]) == 0
+    one, two = (json.loads(line) for line in capsys.readouterr().out.splitlines() if line.strip())
+    assert one["finite"] and two["finite"] and one["peak_rss_mb"] > 0
+    assert one["dataset_mb"] == two["dataset_mb"]  # one copy, whatever S
+    assert two["state_mb_all_seeds"] == pytest.approx(2 * one["state_mb_all_seeds"], rel=0.01)
