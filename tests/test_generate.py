@@ -62,6 +62,27 @@ def test_sac_short_training_run(tmp_path):
     assert meta["hidden"] == [32, 32] and meta["obs_dim"] == 11 and meta["act_dim"] == 3
 
 
+def test_sac_resume_continues_from_the_last_saved_state(tmp_path):
+    """A run stopped at 200 steps (or killed after it: a stray later replay chunk) resumes to 300: the replay is 300
+    valid rows, the cut episode ends with a time-out, and the state (networks, optimisers, RNG) was reloaded."""
+    train("hopper", 180, tmp_path, seed=0, cfg=TINY, eval_every=90, eval_episodes=1, progress=False,
+          max_episode_steps=500)
+    saved = (tmp_path / "state.msgpack").read_bytes()
+    np.savez(tmp_path / "replay" / "0000180_0000200.npz", rewards=np.zeros(20))  # as if killed after step 180
+    run = train("ignored", 300, tmp_path, progress=False, max_episode_steps=500, resume=True)
+    assert run["steps_done"] == 300 and run["stopped"] == "finished" and run["resumed_at"] == [180]
+    assert [c["step"] for c in run["checkpoints"]] == [90, 180, 270, 300]
+    assert run["config"]["hidden"] == [32, 32]  # the run's own config, not the default
+    replay = load_replay(tmp_path)
+    assert len(replay["rewards"]) == 300
+    assert replay["terminals"][179] + replay["timeouts"][179] == 1  # the interrupted episode is closed
+    assert sorted(f.name for f in (tmp_path / "replay").glob("*.npz")) == [
+        "0000000_0000090.npz", "0000090_0000180.npz", "0000180_0000270.npz", "0000270_0000300.npz"]
+    assert (tmp_path / "state.msgpack").read_bytes() != saved
+    with pytest.raises(FileNotFoundError, match="nothing to resume"):
+        train("hopper", 10, tmp_path / "empty", resume=True, progress=False)
+
+
 def test_collect_random_flags():
     limit = 25
     ds = collect("hopper", "random", 400, seed=0, num_envs=3, max_episode_steps=limit)

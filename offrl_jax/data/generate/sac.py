@@ -10,10 +10,15 @@ A run directory holds
     checkpoints/actor_<step>.msgpack   actor variables after `step` env steps (flax msgpack, ~300 KB)
     replay/<start>_<end>.npz      every transition seen, in order, one file per evaluation period
     run.json                      config, env, seed, final step, why it stopped
+    state.msgpack, state.json     the whole training state (networks, targets, optimisers, temperature, keys) and the
+                                  numpy RNG at the last evaluation: `--resume` continues from there
 
 CLI:  python -m offrl_jax.data.generate.sac --env hopper --steps 1000000 --out DIR [--stop-score 100]
+      python -m offrl_jax.data.generate.sac --resume DIR [--steps N]      # continue a stopped or killed run
 Stops early at --stop-score (normalised eval score), on SIGINT / SIGTERM, or when DIR/STOP appears; the transitions
-seen so far are always written.
+seen so far are always written.  A resumed run reloads the state and the replay up to the last evaluation (later
+transitions are dropped), marks the interrupted episode's last transition as a time-out, and starts a new episode:
+the replay stays a valid sequence of episodes, but the run is not bit-identical to an uninterrupted one.
 """
 from __future__ import annotations
 
@@ -33,6 +38,7 @@ import numpy as np
 import optax
 
 from offrl_jax import losses
+from offrl_jax.checkpoint import atomic_write_bytes, atomic_write_text
 from offrl_jax.data.generate.collect import ACTOR_HIDDEN, actor_module, evaluate, make_gen_env
 from offrl_jax.data.generate.replay import ReplayBuffer, load_replay  # noqa: F401  (load_replay re-exported)
 from offrl_jax.envs import get_env_spec, normalized_score
@@ -161,21 +167,34 @@ def train(
     stop_score: float | None = None,
     progress: bool = True,
     max_episode_steps: int | None = None,
+    resume: bool = False,
 ) -> dict[str, Any]:
     """Train SAC for `steps` env steps (or until a stop), writing the run directory described in the module doc.
 
+    `resume=True` continues the run in `out_dir` from its last saved state (env, seed, config and evaluation settings
+    come from its run.json; `steps` may extend the total).
     Returns run.json's content: {"env", "seed", "steps_done", "stopped", "checkpoints": [{"step", "return", ...}]}.
     """
-    spec = get_env_spec(env_name)
     out = Path(out_dir)
+    if resume:
+        run, start = _resume_info(out)
+        env_name, seed, eval_every, eval_episodes = run["env"], run["seed"], run["eval_every"], run["eval_episodes"]
+        cfg = SACConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in run["config"].items()})
+        steps = max(steps or run["steps"], start)
+        run |= {"steps": steps, "stopped": "running", "resumed_at": run.get("resumed_at", []) + [start]}
+        run["checkpoints"] = [c for c in run["checkpoints"] if c["step"] <= start]
+    spec = get_env_spec(env_name)
     (out / "checkpoints").mkdir(parents=True, exist_ok=True)
     (out / "replay").mkdir(exist_ok=True)
-    if (out / "log.jsonl").exists() and (out / "log.jsonl").stat().st_size > 0:
-        raise FileExistsError(f"{out} already holds a SAC run (log.jsonl); use a new --out")
+    if not resume:
+        if (out / "log.jsonl").exists() and (out / "log.jsonl").stat().st_size > 0:
+            raise FileExistsError(f"{out} already holds a SAC run (log.jsonl); use a new --out or --resume")
+        run = {"env": spec.name, "gym_id": spec.gym_id, "seed": seed, "steps": steps,
+               "config": dataclasses.asdict(cfg), "eval_every": eval_every, "eval_episodes": eval_episodes,
+               "obs_dim": spec.obs_dim, "act_dim": spec.act_dim, "steps_done": 0, "stopped": "running",
+               "checkpoints": []}
+        start = 0
     (out / "STOP").unlink(missing_ok=True)
-    run = {"env": spec.name, "gym_id": spec.gym_id, "seed": seed, "steps": steps, "config": dataclasses.asdict(cfg),
-           "eval_every": eval_every, "eval_episodes": eval_episodes, "obs_dim": spec.obs_dim,
-           "act_dim": spec.act_dim, "steps_done": 0, "stopped": "running", "checkpoints": []}
     (out / "run.json").write_text(json.dumps(run, indent=1))
 
     env = make_gen_env(spec.name, max_episode_steps)
@@ -184,6 +203,9 @@ def train(
     state = sac.init(seed)
     buffer = ReplayBuffer(obs_dim, act_dim, steps)
     rng = np.random.default_rng(seed)
+    if resume:
+        state, rng = _load_state(out, state, rng)
+        _reload_replay(out, buffer, start)
 
     stop_reason = {"why": None}
 
@@ -196,14 +218,16 @@ def train(
         from tqdm import tqdm
 
         bar = tqdm(total=steps, desc=f"SAC {spec.name}", unit="step", mininterval=2.0, smoothing=0.02)
-    obs, _ = env.reset(seed=seed)
+    obs, _ = env.reset(seed=seed + start)
     obs = obs.astype(np.float32)
     action = None
     ep_return, ep_len, last_train_return, last_eval = 0.0, 0, float("nan"), float("nan")
-    saved_upto, info, t0, t_period, step = 0, {}, time.time(), time.time(), 0
+    saved_upto, info, t0, t_period, step = start, {}, time.time(), time.time(), start
+    if bar is not None:
+        bar.update(start)
     log = (out / "log.jsonl").open("a")
     try:
-        for step in range(1, steps + 1):
+        for step in range(start + 1, steps + 1):
             if action is None:
                 action = rng.uniform(-1.0, 1.0, act_dim).astype(np.float32)
             next_obs, reward, terminated, truncated, _ = env.step(action)
@@ -231,6 +255,7 @@ def train(
                 ckpt.write_bytes(flax.serialization.to_bytes(state.actor))
                 buffer.save_range(out / "replay" / f"{saved_upto:07d}_{step:07d}.npz", saved_upto, step)
                 saved_upto = step
+                _save_state(out, state, rng, step)
                 now = time.time()
                 entry = {"step": step, "eval_return": last_eval, "eval_returns": returns.round(1).tolist(),
                          "normalized_score": round(score, 2), "train_return": last_train_return,
@@ -270,11 +295,51 @@ def train(
     return run
 
 
+def _save_state(out: Path, state: SACState, rng: np.random.Generator, step: int) -> None:
+    """The whole training state after `step` env steps (atomic: a kill leaves the previous one)."""
+    atomic_write_bytes(out / "state.msgpack", flax.serialization.to_bytes(state))
+    atomic_write_text(out / "state.json", json.dumps({"step": step, "rng": rng.bit_generator.state}))
+
+
+def _resume_info(out: Path) -> tuple[dict[str, Any], int]:
+    if not (out / "run.json").exists() or not (out / "state.json").exists():
+        raise FileNotFoundError(f"{out}: nothing to resume (needs run.json and state.json from a run of this version)")
+    return json.loads((out / "run.json").read_text()), int(json.loads((out / "state.json").read_text())["step"])
+
+
+def _load_state(out: Path, template: SACState, rng: np.random.Generator) -> tuple[SACState, np.random.Generator]:
+    state = flax.serialization.from_bytes(template, (out / "state.msgpack").read_bytes())
+    rng.bit_generator.state = json.loads((out / "state.json").read_text())["rng"]
+    return state, rng
+
+
+def _reload_replay(out: Path, buffer: ReplayBuffer, start: int) -> None:
+    """Refill `buffer` with the first `start` transitions; drop chunks from later steps; end the cut episode."""
+    for f in (out / "replay").glob("*.npz"):
+        if int(f.stem.split("_")[0]) >= start:
+            f.unlink()
+    if start == 0:
+        return
+    data = load_replay(out, upto=start)
+    for k, v in data.items():
+        buffer.data[k][:start] = v
+    buffer.size = start
+    if not (buffer.data["terminals"][start - 1] or buffer.data["timeouts"][start - 1]):
+        buffer.data["timeouts"][start - 1] = 1.0  # the interrupted episode ends here; rewrite its chunk
+        last = max((f for f in (out / "replay").glob("*.npz")), key=lambda f: int(f.stem.split("_")[1]))
+        lo, hi = (int(x) for x in last.stem.split("_"))
+        if hi > start:  # the last chunk runs past the saved state: cut it there
+            last.unlink()
+            last = out / "replay" / f"{lo:07d}_{start:07d}.npz"
+        buffer.save_range(last, lo, start)
+
+
 def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--env", required=True, help="hopper | halfcheetah | walker2d")
-    p.add_argument("--steps", type=int, default=1_000_000)
-    p.add_argument("--out", required=True, help="run directory (must not hold a run already)")
+    p.add_argument("--env", help="hopper | halfcheetah | walker2d (required unless --resume)")
+    p.add_argument("--steps", type=int, default=None, help="total env steps (default 1M; on --resume the run's own)")
+    p.add_argument("--out", help="run directory (must not hold a run already)")
+    p.add_argument("--resume", default=None, help="continue the run in this directory (--steps may extend it)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--eval-every", type=int, default=10_000)
     p.add_argument("--eval-episodes", type=int, default=5)
@@ -282,8 +347,12 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--stop-score", type=float, default=None, help="stop once the normalised eval score reaches this")
     p.add_argument("--no-progress", action="store_true")
     a = p.parse_args(argv)
+    if a.resume is None and (a.env is None or a.out is None):
+        p.error("--env and --out are required (or --resume DIR)")
     cfg = SACConfig(warmup_steps=a.warmup)
-    run = train(a.env, a.steps, a.out, a.seed, cfg, a.eval_every, a.eval_episodes, a.stop_score, not a.no_progress)
+    steps = a.steps if a.steps is not None or a.resume else 1_000_000
+    run = train(a.env, steps, a.resume or a.out, a.seed, cfg, a.eval_every, a.eval_episodes, a.stop_score,
+                not a.no_progress, resume=a.resume is not None)
     best = max(run["checkpoints"], key=lambda c: c["eval_return"], default=None)
     print(json.dumps({"steps_done": run["steps_done"], "stopped": run["stopped"], "best": best}))
 
