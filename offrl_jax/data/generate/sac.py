@@ -27,6 +27,7 @@ import dataclasses
 import functools
 import json
 import signal
+import sys
 import time
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -351,8 +352,12 @@ def main(argv: list[str] | None = None) -> None:
         p.error("--env and --out are required (or --resume DIR)")
     cfg = SACConfig(warmup_steps=a.warmup)
     steps = a.steps if a.steps is not None or a.resume else 1_000_000
-    run = train(a.env, steps, a.resume or a.out, a.seed, cfg, a.eval_every, a.eval_episodes, a.stop_score,
-                not a.no_progress, resume=a.resume is not None)
+    try:
+        run = train(a.env, steps, a.resume or a.out, a.seed, cfg, a.eval_every, a.eval_episodes, a.stop_score,
+                    not a.no_progress, resume=a.resume is not None)
+    except (FileNotFoundError, FileExistsError, ValueError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        sys.exit(2)
     best = max(run["checkpoints"], key=lambda c: c["eval_return"], default=None)
     print(json.dumps({"steps_done": run["steps_done"], "stopped": run["stopped"], "best": best}))
 
