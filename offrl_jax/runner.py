@@ -98,9 +98,10 @@ def run_study(study: Study, out_dir: Path, dataset: Dataset, resume: bool = Fals
     """Run (or resume) every variant; write results as it goes; return the summary.
 
     Variants that differ only in one sweepable hyper-parameter (`sweep_groups`) train as one vmapped program unless
-    `study.vmap_sweeps` is off.  `parallel` > 1 runs that many variants (or groups) at once in threads.  A jitted chunk releases the GIL, and at these network
-    sizes one XLA program keeps only about one CPU core busy, so two variants at once use a 2-core machine better.
-    Results do not depend on it (every variant's randomness is its own).
+    `study.vmap_sweeps` is off.  `parallel` > 1 runs that many variants (or groups) at once in threads: a jitted
+    chunk releases the GIL, and at these network sizes one XLA program keeps only about one CPU core busy, so two
+    variants at once use a 2-core machine better.  Results do not depend on either (each variant's randomness is
+    its own).
     """
     out_dir.mkdir(parents=True, exist_ok=True)
     if not resume:
@@ -148,9 +149,9 @@ class _Recorder:
         self.path, self.rows = path, {label: [] for label in labels}
         self.lock, self.stop = threading.Lock(), threading.Event()
 
-    def set(self, label: str, rows: list[dict]) -> None:
+    def set(self, rows_by_label: dict[str, list[dict]]) -> None:
         with self.lock:
-            self.rows[label] = list(rows)
+            self.rows.update({label: list(rows) for label, rows in rows_by_label.items()})
             write_curves(self.path, self.all_rows())
 
     def all_rows(self) -> list[dict]:
@@ -160,17 +161,17 @@ class _Recorder:
 def sweep_groups(variants: tuple[Variant, ...]) -> list[tuple[tuple[Variant, ...], str | None]]:
     """Variants of one algorithm whose overrides differ only in one sweepable hyper-parameter (`SWEEPABLE`, e.g.
     TD3+BC's alpha) run as one vmapped program: [(variants, swept name or None)], in study order of first member."""
-    groups: list[tuple[list[Variant], list[str | None]]] = []
+    groups: list[list] = []  # [[variants], swept name or None]
     for v in variants:
-        for members, name in groups:
-            key = _swept_name(members[0], v)
-            if key is not None and name[0] in (None, key):
-                members.append(v)
-                name[0] = key
+        for group in groups:
+            key = _swept_name(group[0][0], v)
+            if key is not None and group[1] in (None, key):
+                group[0].append(v)
+                group[1] = key
                 break
         else:
-            groups.append(([v], [None]))
-    return [(tuple(members), name[0]) for members, name in groups]
+            groups.append([[v], None])
+    return [(tuple(members), name) for members, name in groups]
 
 
 def _swept_name(a: Variant, b: Variant) -> str | None:
@@ -202,8 +203,7 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
     states, start, seconds, rows = None, 0, 0.0, []
 
     def record():
-        for label in labels:
-            recorder.set(label, [r for r in rows if r["variant"] == label])
+        recorder.set({label: [r for r in rows if r["variant"] == label] for label in labels})
 
     if resume and ckpt_path.exists():
         states, start, seconds, rows = load_checkpoint(ckpt_path, driver.init())
