@@ -20,7 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
 
-from offrl_jax.algos.common import Phase
+from offrl_jax.algos.common import Phase, with_hparams
 from offrl_jax.data.dataset import Dataset, normalize_obs
 from offrl_jax.data.returns import returns_to_go
 
@@ -135,8 +135,6 @@ class Driver:
 
     def _phase_for(self, total: int, index: int) -> Callable[[dict[str, jax.Array]], Phase]:
         """hparams -> phase `index` of the algorithm rebuilt with those (traced) hyper-parameter values."""
-        from offrl_jax.algos.common import with_hparams
-
         return lambda hparams: with_hparams(self.algo, **hparams).phases(total)[index]
 
     def _chunk_fn(self, phase: Phase, num_calls: int, phase_for=None) -> Callable:
