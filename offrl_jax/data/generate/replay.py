@@ -43,6 +43,12 @@ class ReplayBuffer:
         np.savez(path, **{k: v[start:end] for k, v in self.data.items()})
 
 
+def chunk_range(path: Path) -> tuple[int, int]:
+    """(start, end) env steps of a `replay/<start>_<end>.npz` chunk."""
+    start, end = path.stem.split("_")
+    return int(start), int(end)
+
+
 def load_replay(run_dir: str | Path, upto: int | None = None) -> dict[str, np.ndarray]:
     """Every transition of a run, in order, up to env step `upto` (all if None).  Dataset field arrays."""
     files = sorted((Path(run_dir) / "replay").glob("*.npz"))
@@ -50,7 +56,7 @@ def load_replay(run_dir: str | Path, upto: int | None = None) -> dict[str, np.nd
         raise FileNotFoundError(f"no replay chunks in {run_dir}/replay")
     parts: dict[str, list[np.ndarray]] = {}
     for f in files:
-        start = int(f.stem.split("_")[0])
+        start, _ = chunk_range(f)
         if upto is not None and start >= upto:
             break
         with np.load(f) as z:

@@ -41,7 +41,7 @@ import optax
 from offrl_jax import losses
 from offrl_jax.checkpoint import atomic_write_bytes, atomic_write_text
 from offrl_jax.data.generate.collect import ACTOR_HIDDEN, actor_module, evaluate, make_gen_env
-from offrl_jax.data.generate.replay import ReplayBuffer, load_replay  # noqa: F401  (load_replay re-exported)
+from offrl_jax.data.generate.replay import ReplayBuffer, chunk_range, load_replay
 from offrl_jax.envs import get_env_spec, normalized_score
 from offrl_jax.nets import CriticEnsemble, sample_tanh_gaussian
 
@@ -178,7 +178,8 @@ def train(
     """
     out = Path(out_dir)
     if resume:
-        run, start = _resume_info(out)
+        run, saved = _resume_info(out)
+        start = int(saved["step"])
         env_name, seed, eval_every, eval_episodes = run["env"], run["seed"], run["eval_every"], run["eval_episodes"]
         cfg = SACConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in run["config"].items()})
         steps = max(steps or run["steps"], start)
@@ -205,7 +206,8 @@ def train(
     buffer = ReplayBuffer(obs_dim, act_dim, steps)
     rng = np.random.default_rng(seed)
     if resume:
-        state, rng = _load_state(out, state, rng)
+        state = flax.serialization.from_bytes(state, (out / "state.msgpack").read_bytes())
+        rng.bit_generator.state = saved["rng"]
         _reload_replay(out, buffer, start)
 
     stop_reason = {"why": None}
@@ -302,22 +304,17 @@ def _save_state(out: Path, state: SACState, rng: np.random.Generator, step: int)
     atomic_write_text(out / "state.json", json.dumps({"step": step, "rng": rng.bit_generator.state}))
 
 
-def _resume_info(out: Path) -> tuple[dict[str, Any], int]:
+def _resume_info(out: Path) -> tuple[dict[str, Any], dict[str, Any]]:
+    """(run.json, state.json: {"step", "rng"}) of a run to resume."""
     if not (out / "run.json").exists() or not (out / "state.json").exists():
         raise FileNotFoundError(f"{out}: nothing to resume (needs run.json and state.json from a run of this version)")
-    return json.loads((out / "run.json").read_text()), int(json.loads((out / "state.json").read_text())["step"])
-
-
-def _load_state(out: Path, template: SACState, rng: np.random.Generator) -> tuple[SACState, np.random.Generator]:
-    state = flax.serialization.from_bytes(template, (out / "state.msgpack").read_bytes())
-    rng.bit_generator.state = json.loads((out / "state.json").read_text())["rng"]
-    return state, rng
+    return json.loads((out / "run.json").read_text()), json.loads((out / "state.json").read_text())
 
 
 def _reload_replay(out: Path, buffer: ReplayBuffer, start: int) -> None:
     """Refill `buffer` with the first `start` transitions; drop chunks from later steps; end the cut episode."""
     for f in (out / "replay").glob("*.npz"):
-        if int(f.stem.split("_")[0]) >= start:
+        if chunk_range(f)[0] >= start:
             f.unlink()
     if start == 0:
         return
@@ -327,8 +324,8 @@ def _reload_replay(out: Path, buffer: ReplayBuffer, start: int) -> None:
     buffer.size = start
     if not (buffer.data["terminals"][start - 1] or buffer.data["timeouts"][start - 1]):
         buffer.data["timeouts"][start - 1] = 1.0  # the interrupted episode ends here; rewrite its chunk
-        last = max((f for f in (out / "replay").glob("*.npz")), key=lambda f: int(f.stem.split("_")[1]))
-        lo, hi = (int(x) for x in last.stem.split("_"))
+        last = max((out / "replay").glob("*.npz"), key=lambda f: chunk_range(f)[1])
+        lo, hi = chunk_range(last)
         if hi > start:  # the last chunk runs past the saved state: cut it there
             last.unlink()
             last = out / "replay" / f"{lo:07d}_{start:07d}.npz"
