@@ -4,10 +4,11 @@
 
 Each (algorithm, S) runs in a fresh subprocess: build a synthetic hopper-shaped dataset of `--transitions` rows, put it
 on the device (`device_data`), initialise S seeds with the real `Driver`, and run 20 updates of every phase
-(EDAC's soft-return computation over the whole dataset included); the child reports its peak resident set size (`ru_maxrss`) and the bytes of the device arrays it holds.
-The dataset (obs, next obs, actions, rewards, flags, returns: ~130 MB at 1M hopper rows in float32) is passed to the
+(EDAC's soft-return computation over the whole dataset included); the child reports its peak resident set size
+(`ru_maxrss`) and the bytes of the device arrays it holds.
+The dataset (obs, next obs, actions, rewards, flags, returns: 111 MB at 1M hopper rows in float32) is passed to the
 vmapped chunk with `in_axes=None`, so S seeds share one copy; what grows with S is the agent state (parameters, Adam
-moments, targets: ~2 MB per TD3+BC seed) and, for EDAC, each seed's own soft returns (4 bytes per transition).
+moments, targets: ~3 MB per TD3+BC seed) and, for EDAC, each seed's own soft returns (4 bytes per transition).
 """
 from __future__ import annotations
 
