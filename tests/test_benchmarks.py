@@ -65,3 +65,27 @@ def test_memory_json_dataset_is_shared_by_seeds(capsys):
     assert one["finite"] and two["finite"] and one["peak_rss_mb"] > 0
     assert one["dataset_mb"] == two["dataset_mb"]  # one copy, whatever S
     assert two["state_mb_all_seeds"] == pytest.approx(2 * one["state_mb_all_seeds"], rel=0.01)
+
+
+def test_handwritten_fused_layer_norm_vjp_matches_autodiff():
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+
+    from benchmarks.handwritten import ln_relu, ln_relu_fused
+
+    x = jax.random.normal(jax.random.PRNGKey(0), (2, 5, 8))
+    g = 1.0 + 0.1 * jax.random.normal(jax.random.PRNGKey(1), (8,))
+    b = 0.1 * (jnp.arange(8.0) - 4.0)  # some pre-activations negative: the ReLU mask matters
+    dy = jax.random.normal(jax.random.PRNGKey(2), (2, 5, 8))
+    out_ref, vjp_ref = jax.vjp(ln_relu, x, g, b)
+    out, vjp = jax.vjp(ln_relu_fused, x, g, b)
+    np.testing.assert_allclose(out, out_ref, rtol=1e-5, atol=1e-6)
+    for got, want in zip(vjp(dy), vjp_ref(dy)):
+        np.testing.assert_allclose(got, want, rtol=1e-4, atol=1e-5)
+
+
+def test_handwritten_runs_unrolled_seeds():
+    from benchmarks.handwritten import run
+
+    assert run(seeds=2, mode="unrolled", calls=2, reps=1) > 0
