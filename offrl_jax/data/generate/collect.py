@@ -102,8 +102,8 @@ def make_gen_env(env_name: str, max_episode_steps: int | None = None):
     return gym.make(get_env_spec(env_name).gym_id, max_episode_steps=max_episode_steps)
 
 
-def _make_envs(env_name: str, num_envs: int, max_episode_steps: int | None):
-    envs = [make_gen_env(env_name, max_episode_steps) for _ in range(num_envs)]
+def _make_envs(env_name: str, num_envs: int, max_episode_steps: int | None, make: Callable | None = None):
+    envs = [make() if make is not None else make_gen_env(env_name, max_episode_steps) for _ in range(num_envs)]
     for env in envs:
         low, high = env.action_space.low, env.action_space.high
         if not (np.allclose(low, -1.0) and np.allclose(high, 1.0)):
@@ -117,14 +117,20 @@ def rollout_episodes(
     num_envs: int = 16,
     seed: int = 0,
     max_episode_steps: int | None = None,
+    make: Callable[[], Any] | None = None,
+    info_keys: tuple[str, ...] = (),
 ) -> Iterator[tuple[int, dict[str, np.ndarray]]]:
     """Endless generator of finished episodes `(env_index, episode)`, episode a dict of `Dataset` fields (float32).
 
     `act(obs (num_envs, obs_dim)) -> actions (num_envs, act_dim)`.  Env i is reset with seed `seed * 10_000 + i` once,
     then continues its own RNG.  A step that is both terminated and truncated counts as a terminal.  The recorded
     next observation is the env's real s_{t+1}, also at a time-out (the reset observation is never recorded).
+
+    `make() -> env` builds each env instead of `make_gen_env(env_name, max_episode_steps)` (env_name then only gives
+    the default horizon).  Every key in `info_keys` adds a (n,) float32 field to the episode: `info.get(key, 0)` of
+    each step (e.g. "success" for the Adroit envs).
     """
-    envs = _make_envs(env_name, num_envs, max_episode_steps)
+    envs = _make_envs(env_name, num_envs, max_episode_steps, make)
     horizon = max_episode_steps or get_env_spec(env_name).max_episode_steps
     obs_dim = envs[0].observation_space.shape[0]
     act_dim = envs[0].action_space.shape[0]
@@ -133,6 +139,7 @@ def rollout_episodes(
         "actions": np.zeros((num_envs, horizon, act_dim), np.float32),
         "rewards": np.zeros((num_envs, horizon), np.float32),
         "next_observations": np.zeros((num_envs, horizon, obs_dim), np.float32),
+        **{key: np.zeros((num_envs, horizon), np.float32) for key in info_keys},
     }
     lengths = np.zeros(num_envs, np.int64)
     obs = np.stack([env.reset(seed=seed * 10_000 + i)[0] for i, env in enumerate(envs)]).astype(np.float32)
@@ -141,11 +148,13 @@ def rollout_episodes(
             actions = np.asarray(act(obs), dtype=np.float32)
             for i, env in enumerate(envs):
                 t = lengths[i]
-                next_obs, reward, terminated, truncated, _ = env.step(actions[i])
+                next_obs, reward, terminated, truncated, info = env.step(actions[i])
                 buf["observations"][i, t] = obs[i]
                 buf["actions"][i, t] = actions[i]
                 buf["rewards"][i, t] = reward
                 buf["next_observations"][i, t] = next_obs
+                for key in info_keys:
+                    buf[key][i, t] = info.get(key, 0)
                 lengths[i] = t + 1
                 if terminated or truncated or t + 1 >= horizon:
                     n = t + 1

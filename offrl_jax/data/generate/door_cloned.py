@@ -93,63 +93,55 @@ def rollout(act: Callable[[np.ndarray], np.ndarray], min_transitions: int, max_t
     reward, until at least `min_transitions` rows (the episode crossing `max_transitions` is cut there, ending in a
     time-out).  Env i is reset with seed `seed * 10_000 + i` once and then continues its own RNG.
 
+    The envs are stepped by `collect.rollout_episodes`; episodes are taken in the order they finish, and the cut one is
+    cut after it has finished.  Door episodes all run the full horizon in lockstep, so that is the episode a cut in
+    mid-episode would also hit; with episodes of different lengths other envs could finish episodes before it.
+
     Returns (arrays of the Dataset fields, float32, episodes in the order they finish; stats).
     """
     from offrl_jax.adroit import with_original_reward
+    from offrl_jax.data.generate.collect import rollout_episodes
     from offrl_jax.envs import get_env_spec, make_env
 
     horizon = get_env_spec("door").max_episode_steps
     max_transitions = max_transitions or min_transitions
     num_envs = max(1, min(num_envs, math.ceil(min_transitions / horizon)))
-    envs = [with_original_reward(make_env("door", disable_env_checker=True)) for _ in range(num_envs)]
     rng = np.random.default_rng(seed)
-    obs = np.stack([e.reset(seed=seed * 10_000 + i)[0] for i, e in enumerate(envs)]).astype(np.float32)
-    bufs = [{k: [] for k in ("observations", "actions", "rewards", "next_observations")} for _ in envs]
-    success = np.zeros(num_envs, bool)
+
+    def noisy_act(obs: np.ndarray) -> np.ndarray:
+        actions = act(obs)
+        if noise_std > 0:
+            actions = actions + noise_std * rng.standard_normal(actions.shape)
+        return np.clip(actions, -1.0, 1.0).astype(np.float32)
+
     episodes, successes, total = [], [], 0
     bar = None
     if progress:
         from tqdm import tqdm
 
         bar = tqdm(total=min_transitions, desc="door-cloned: rollouts", unit="tr", mininterval=1.0)
+    gen = rollout_episodes("door", noisy_act, num_envs, seed, info_keys=("success",),
+                           make=lambda: with_original_reward(make_env("door", disable_env_checker=True)))
     try:
-        while total < min_transitions:
-            actions = act(obs)
-            if noise_std > 0:
-                actions = actions + noise_std * rng.standard_normal(actions.shape)
-            actions = np.clip(actions, -1.0, 1.0).astype(np.float32)
-            for i, env in enumerate(envs):
-                next_obs, reward, terminated, truncated, info = env.step(actions[i])
-                b = bufs[i]
-                b["observations"].append(obs[i].copy())
-                b["actions"].append(actions[i])
-                b["rewards"].append(reward)
-                b["next_observations"].append(np.asarray(next_obs, np.float32))
-                success[i] |= bool(info.get("success", False))
-                cut = max_transitions - total <= len(b["rewards"])
-                if terminated or truncated or cut:
-                    n = len(b["rewards"])
-                    ep = {k: np.asarray(v, np.float32) for k, v in b.items()}
-                    ep["terminals"] = np.zeros(n, np.float32)
-                    ep["timeouts"] = np.zeros(n, np.float32)
-                    ep["terminals" if terminated and not cut else "timeouts"][-1] = 1.0
-                    episodes.append(ep)
-                    successes.append(bool(success[i]))
-                    total += n
-                    if bar is not None:
-                        bar.update(n)
-                        bar.set_postfix(episodes=len(episodes), ret=f"{ep['rewards'].sum():.0f}", refresh=False)
-                    bufs[i] = {k: [] for k in b}
-                    success[i] = False
-                    next_obs, _ = env.reset()
-                    if total >= min_transitions:
-                        break
-                obs[i] = next_obs
+        for _, ep in gen:
+            n = len(ep["rewards"])
+            if total + n >= max_transitions:  # reaching max_transitions is a cut: a time-out, never a terminal
+                n = max_transitions - total
+                ep = {k: v[:n] for k, v in ep.items()}
+                ep["terminals"][-1] = 0.0
+                ep["timeouts"][-1] = 1.0
+            episodes.append(ep)
+            successes.append(bool(ep["success"].any()))
+            total += n
+            if bar is not None:
+                bar.update(n)
+                bar.set_postfix(episodes=len(episodes), ret=f"{ep['rewards'].sum():.0f}", refresh=False)
+            if total >= min_transitions or total >= max_transitions:
+                break
     finally:
+        gen.close()
         if bar is not None:
             bar.close()
-        for env in envs:
-            env.close()
     arrays = {k: np.concatenate([e[k] for e in episodes]) for k in ARRAY_FIELDS}
     returns = np.array([e["rewards"].sum() for e in episodes])
     stats = {"episodes": len(episodes), "transitions": int(total), "return_mean": float(returns.mean()),
