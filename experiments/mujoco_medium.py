@@ -45,6 +45,8 @@ def parser(prog: str = "experiments.mujoco_medium", doc: str = __doc__, updates:
     g.add_argument("--num-critics", type=int, default=None, help="EDAC/SAC-N ensemble size (default: per env)")
     g.add_argument("--eta", type=float, nargs="+", default=None,
                    help="EDAC diversity weight; several values = a sweep, vmapped in one program")
+    g.add_argument("--actor-pretrain-fraction", type=float, default=None,
+                   help="EDAC: share of --pretrain-updates spent on soft BC, the rest on the critic (default 0.5)")
     g.add_argument("--hidden", type=positive_int, nargs="+", default=None, help="hidden layer widths (default per algo)")
     g.add_argument("--actor-lr", type=float, default=None)
     g.add_argument("--critic-lr", type=float, default=None)
@@ -58,7 +60,8 @@ def overrides(args) -> dict:
     return {"lam": args.lam, "lambda_mode": args.lambda_mode, "actor_layer_norm": args.actor_ln,
             "critic_layer_norm": args.critic_ln, "alpha": args.alpha, "num_critics": args.num_critics,
             "eta": args.eta, "pretrain_updates": args.pretrain_updates, "actor_lr": args.actor_lr,
-            "critic_lr": args.critic_lr, "hidden": tuple(args.hidden) if args.hidden else None}
+            "critic_lr": args.critic_lr, "hidden": tuple(args.hidden) if args.hidden else None,
+            "actor_pretrain_fraction": args.actor_pretrain_fraction}
 
 
 def build(args) -> Study | list[Study]:

@@ -44,6 +44,8 @@ def curves_without_time(path: Path) -> list[dict]:
     (["--lam", "1.5"], "lam = 1.5 must be in [0, 1]"),
     (["--batch-size", "-4"], "positive integer"),
     (["--algo", "edac", "--num-critics", "1"], "num_critics = 1 must be >= 2"),
+    (["--algo", "edac", "--actor-pretrain-fraction", "1.5"], "actor_pretrain_fraction = 1.5 must be in [0, 1]"),
+    (["--actor-pretrain-fraction", "0.5"], "'actor_pretrain_fraction' is not a hyper-parameter of td3bc"),
     (["--dataset-path", "/nonexistent/file.hdf5"], "/nonexistent/file.hdf5"),
     (["--resume", "/nonexistent/run"], "nothing to resume"),
 ])
