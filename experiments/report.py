@@ -4,12 +4,15 @@
 
 One table per run directory: variant, final score (mean ± 95 % CI over seeds), updates and seconds to 90 % of the
 from-scratch asymptote, with the asymptote and its trend (see `offrl_jax.runner.summarize`).  A directory holding
-several studies (sub-directories with a summary.json each) gives one table per study.
+several studies (sub-directories with a summary.json each) gives one table per study.  `--curves` adds the
+seed-mean score at every evaluation (rows: variants, columns: updates) from the run's curves.csv.
 """
 from __future__ import annotations
 
+import csv
 import json
 import sys
+from collections import defaultdict
 from pathlib import Path
 
 from experiments.common import OneLineParser
@@ -40,14 +43,33 @@ def table(summary: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def curve_table(curves: Path) -> str:
+    """Seed-mean score per variant (rows) at every evaluation (columns) of a curves.csv."""
+    scores: dict[str, dict[int, list[float]]] = defaultdict(lambda: defaultdict(list))
+    with open(curves) as f:
+        for row in csv.DictReader(f):
+            if row["score"]:
+                scores[row["variant"]][int(row["update"])].append(float(row["score"]))
+    updates = sorted({u for per in scores.values() for u in per})
+    label = lambda u: f"{u / 1000:g}k" if u >= 1000 else str(u)  # noqa: E731
+    lines = ["| updates | " + " | ".join(label(u) for u in updates) + " |", "|---" * (len(updates) + 1) + "|"]
+    for variant, per in scores.items():
+        cells = [f"{sum(per[u]) / len(per[u]):.1f}" if per.get(u) else "" for u in updates]
+        lines.append(f"| {variant} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def main(argv=None) -> int:
     p = OneLineParser(prog="experiments.report", description=__doc__)
     p.add_argument("dirs", nargs="+", type=Path, help="run directories (or directories of studies)")
+    p.add_argument("--curves", action="store_true", help="also the seed-mean score at every evaluation")
     args = p.parse_args(argv)
     try:
         for d in args.dirs:
             for path in summaries(d):
                 print(f"### {path.parent}\n\n{table(json.loads(path.read_text()))}\n")
+                if args.curves:
+                    print(curve_table(path.parent / "curves.csv") + "\n")
     except (FileNotFoundError, json.JSONDecodeError, KeyError, IndexError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

@@ -15,8 +15,8 @@ def test_summary_numbers_by_hand():
                   reference="scratch")
     scratch = [[10, 20, 30, 40, 50, 60, 70, 80, 90, 100], [10, 20, 30, 40, 50, 60, 70, 80, 90, 100]]
     pretrained = [[50, 95, 90, 90, 90, 90, 90, 90, 90, 80], [50, 85, 90, 90, 90, 90, 90, 90, 90, 100]]
-    summary = {s["variant"]: s for s in summarize(study, rows_of("pretrained", pretrained) + rows_of("scratch", scratch),
-                                                  {"pretrained": 1000})}
+    rows = rows_of("pretrained", pretrained) + rows_of("scratch", scratch)
+    summary = {s["variant"]: s for s in summarize(study, rows, {"pretrained": 1000})}
     # final = mean of the last 10 % of evaluations (1 of 10) per seed, then over seeds
     assert summary["scratch"]["final_score_mean"] == 100 and summary["pretrained"]["final_score_mean"] == 90
     assert summary["pretrained"]["asymptote"] == 100
@@ -43,3 +43,14 @@ def test_report_renders_summary_and_rejects_missing_dir(tmp_path, capsys):
     assert "| scratch | 30.0 ± " in out and "asymptote (from-scratch final) 30.0" in out
     assert report.main([str(tmp_path / "missing")]) == 2
     assert capsys.readouterr().err.startswith("error: ")
+
+
+def test_report_curve_table_is_the_seed_mean_per_evaluation(tmp_path):
+    from experiments.report import curve_table
+
+    rows = ["variant,seed,update,score", "a,0,1000,10", "a,1,1000,20", "a,0,2000,30", "a,1,2000,50", "b,0,2000,7",
+            "b,0,2500,"]  # an empty score (a row without evaluation) is skipped
+    (tmp_path / "curves.csv").write_text("\n".join(rows) + "\n")
+    lines = curve_table(tmp_path / "curves.csv").splitlines()
+    assert lines[0] == "| updates | 1k | 2k |"
+    assert lines[2] == "| a | 15.0 | 40.0 |" and lines[3] == "| b |  | 7.0 |"
