@@ -71,8 +71,9 @@ def main(argv=None) -> int:
             rows.append(json.loads(out.stdout.strip().splitlines()[-1]))
             r = rows[-1]
             if not args.json:
-                print(f"{algo:8s} S={s:<3d} peak RSS {r['peak_rss_mb']:8.1f} MB   dataset on device {r['dataset_mb']:6.1f}"
-                      f" MB (once)   agent states {r['state_mb_all_seeds']:7.2f} MB (all seeds)")
+                print(f"{algo:8s} S={s:<3d} peak RSS {r['peak_rss_mb']:8.1f} MB   "
+                      f"dataset on device {r['dataset_mb']:6.1f} MB (once)   "
+                      f"agent states {r['state_mb_all_seeds']:7.2f} MB (all seeds)")
     if args.json:
         for r in rows:
             print(json.dumps(r))

@@ -11,8 +11,8 @@ import json
 import shutil
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 from offrl_jax import datasets
 from offrl_jax.data.dataset import DatasetError
@@ -56,8 +56,8 @@ def run_args(parser: argparse.ArgumentParser, updates: int, eval_every: int, see
     g.add_argument("--overwrite", action="store_true", help="allow writing into an existing non-empty --out")
     g.add_argument("--resume", type=Path, default=None, help="continue the run saved in this directory")
     g.add_argument("--parallel", type=positive_int, default=2,
-                   help="variants trained at once, in threads (default %(default)s: one XLA program at these sizes keeps "
-                        "about one CPU core busy); 1 = one after another")
+                   help="variants trained at once, in threads (default %(default)s: one XLA program at these sizes "
+                        "keeps about one CPU core busy); 1 = one after another")
     g.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 

@@ -14,7 +14,8 @@ from experiments.mujoco_medium import given, make_study, parser, sweep_variants
 def build(args):
     extra = {k: v for k, v in given(args).items() if k != "lam"}
     variants = tuple(v for lam in args.lambdas
-                     for v in sweep_variants(f"lambda={lam:g}", args.algo, {"pretrain": "actor+critic", "lam": lam} | extra))
+                     for v in sweep_variants(f"lambda={lam:g}", args.algo,
+                                             {"pretrain": "actor+critic", "lam": lam} | extra))
     variants += sweep_variants("scratch", args.algo, {"pretrain": "none"} | extra)
     return make_study(args.env, args.algo, args.level, args, variants=variants, reference="scratch",
                       name=f"lambda-{args.env}-{args.level}-{args.algo}")

@@ -47,7 +47,8 @@ def parser(prog: str = "experiments.mujoco_medium", doc: str = __doc__, updates:
                    help="EDAC diversity weight; several values = a sweep, vmapped in one program")
     g.add_argument("--actor-pretrain-fraction", type=float, default=None,
                    help="EDAC: share of --pretrain-updates spent on soft BC, the rest on the critic (default 0.5)")
-    g.add_argument("--hidden", type=positive_int, nargs="+", default=None, help="hidden layer widths (default per algo)")
+    g.add_argument("--hidden", type=positive_int, nargs="+", default=None,
+                   help="hidden layer widths (default per algo)")
     g.add_argument("--actor-lr", type=float, default=None)
     g.add_argument("--critic-lr", type=float, default=None)
     g.add_argument("--preset", choices=("paper",), default=None,

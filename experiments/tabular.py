@@ -36,7 +36,8 @@ def mc_initialisation(gamma: float = 1.0) -> dict[tuple[int, str], float]:
     return {pair: float(np.mean(gs)) for pair, gs in visits.items()}
 
 
-def q_learning(q: dict[tuple[int, str], float], epochs: int = 3, gamma: float = 1.0, lr: float = 1.0) -> list[list[float]]:
+def q_learning(q: dict[tuple[int, str], float], epochs: int = 3, gamma: float = 1.0,
+               lr: float = 1.0) -> list[list[float]]:
     """Q values of the table's columns after each epoch 0..epochs."""
     q = dict(q)
     history = [[q[p] for p in PAIRS]]

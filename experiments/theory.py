@@ -93,8 +93,9 @@ def table(rows: list[dict]) -> list[dict]:
     for eps in sorted({r["eps"] for r in rows}):
         for beta in sorted({r["beta"] for r in rows}):
             sel = [r for r in rows if r["eps"] == eps and r["beta"] == beta]
-            row = {"eps": eps, "beta": beta} | {k: float(np.mean([r[k] for r in sel])) for k in
-                                                ("err_behaviour", "err_zero", "k_zero", "k_behaviour", "measured_saving")}
+            row = {"eps": eps, "beta": beta} | {
+                k: float(np.mean([r[k] for r in sel]))
+                for k in ("err_behaviour", "err_zero", "k_zero", "k_behaviour", "measured_saving")}
             predicted = [r["predicted_saving"] for r in sel]
             row["predicted_saving"] = None if None in predicted else float(np.mean(predicted))
             out.append(row)

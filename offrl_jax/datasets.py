@@ -19,7 +19,6 @@ import sys
 import warnings
 from pathlib import Path
 
-
 from offrl_jax.data.dataset import Dataset, DatasetError, dataset_dir
 from offrl_jax.data.readers import load_dataset_path, minari_root, read_door_npz, read_minari
 from offrl_jax.envs import get_env_spec, normalized_score

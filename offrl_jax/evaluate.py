@@ -5,7 +5,8 @@ episode seeds (start states), so differences between variants are not start-stat
 """
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import jax
 import jax.numpy as jnp

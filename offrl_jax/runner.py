@@ -44,7 +44,7 @@ class Variant:
     overrides: tuple[tuple[str, Any], ...] = ()  # config overrides as (name, value) pairs
 
     @staticmethod
-    def of(label: str, algo: str, **overrides: Any) -> "Variant":
+    def of(label: str, algo: str, **overrides: Any) -> Variant:
         return Variant(label, algo, tuple(sorted(overrides.items())))
 
 
@@ -84,7 +84,7 @@ class Study:
         return json.dumps(dataclasses.asdict(self), indent=2)
 
     @staticmethod
-    def from_json(text: str) -> "Study":
+    def from_json(text: str) -> Study:
         raw = json.loads(text)
         raw["variants"] = tuple(Variant(v["label"], v["algo"], tuple(tuple(o) for o in v["overrides"]))
                                 for v in raw["variants"])

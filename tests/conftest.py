@@ -6,7 +6,8 @@ from offrl_jax.data.dataset import Dataset
 
 def synthetic_dataset(transitions: int = 2000, env: str = "hopper", obs_dim: int = 11, act_dim: int = 3,
                       episode_len: int = 100, seed: int = 0) -> Dataset:
-    """A small random dataset (learnable reward 1 + 0.1 s_0) with time-outs every `episode_len` rows, a few terminals."""
+    """A small random dataset (learnable reward 1 + 0.1 s_0) with time-outs every `episode_len` rows, a few
+    terminals."""
     rng = np.random.default_rng(seed)
     obs = rng.normal(size=(transitions + 1, obs_dim)).astype(np.float32)
     timeouts = np.zeros(transitions, np.float32)

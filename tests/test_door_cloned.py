@@ -80,7 +80,7 @@ def test_recorded_demo_rewards_are_the_original_reward():
 @needs_demos
 def test_generate_door_cloned_tiny(tmp_path):
     from offrl_jax.data.generate.door_cloned import generate_door_cloned
-    from offrl_jax.data.readers import read_minari, read_door_npz
+    from offrl_jax.data.readers import read_door_npz, read_minari
 
     n = 1000
     with warnings.catch_warnings():

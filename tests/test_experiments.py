@@ -117,7 +117,8 @@ def test_vmapped_alpha_sweep_equals_separate_runs(tmp_path, tiny_dataset):
 
     from offrl_jax.runner import Study, Variant, run_study
 
-    variants = tuple(Variant.of(f"alpha={a:g}", "td3bc", pretrain="none", alpha=a, hidden=(32, 32)) for a in (1.0, 10.0))
+    variants = tuple(Variant.of(f"alpha={a:g}", "td3bc", pretrain="none", alpha=a, hidden=(32, 32))
+                     for a in (1.0, 10.0))
     study = Study(name="sweep", dataset="synthetic", env="hopper", variants=variants, seeds=(0, 1), updates=200,
                   eval_every=100, eval_episodes=1, batch_size=32)
     together = run_study(study, tmp_path / "together", tiny_dataset, progress=False)

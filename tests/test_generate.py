@@ -1,4 +1,5 @@
-"""Dataset generation: SAC update / short training run, rollouts' episode flags, generate() -> minari, shipped policies."""
+"""Dataset generation: SAC update / short training run, rollouts' episode flags, generate() -> minari, shipped
+policies."""
 from __future__ import annotations
 
 import json
@@ -7,9 +8,8 @@ import jax
 import numpy as np
 import pytest
 
-from offrl_jax.data.generate.collect import POLICY_DIR
 from offrl_jax.data.generate import generate, shipped_policies
-from offrl_jax.data.generate.collect import collect, load_policy, make_policy
+from offrl_jax.data.generate.collect import POLICY_DIR, collect, load_policy, make_policy
 from offrl_jax.data.generate.sac import SACConfig, load_replay, make_sac, train
 
 needs_medium = pytest.mark.skipif("hopper-medium" not in shipped_policies(), reason="no shipped hopper-medium policy")

@@ -2,8 +2,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from offrl_jax.nets import (CriticEnsemble, DeterministicActor, TanhGaussianActor, sample_tanh_gaussian,
-                            tanh_gaussian_log_prob)
+from offrl_jax.nets import (
+    CriticEnsemble,
+    DeterministicActor,
+    TanhGaussianActor,
+    sample_tanh_gaussian,
+    tanh_gaussian_log_prob,
+)
 
 
 def test_shapes_and_layer_norm_flag():

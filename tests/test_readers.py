@@ -11,8 +11,7 @@ import numpy as np
 import pytest
 
 from offrl_jax.data.dataset import DatasetError
-from offrl_jax.data.readers import (infer_env, load_dataset_path, read_d4rl_hdf5, read_door_npz, read_minari,
-                                    validate)
+from offrl_jax.data.readers import infer_env, load_dataset_path, read_d4rl_hdf5, read_door_npz, read_minari, validate
 from offrl_jax.datasets import door_human_path
 
 

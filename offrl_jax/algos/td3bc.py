@@ -65,7 +65,8 @@ class TD3BCConfig:
     target: Literal["td", "max_mc"] = "td"  # offline-RL critic target; max_mc = Q-Transformer's max(MC, TD)
     bc_only: bool = False  # the BC baseline: actor pre-training for the whole budget
 
-    SWEEPABLE: ClassVar[tuple[str, ...]] = ("alpha", "tau", "policy_noise", "noise_clip")  # vmappable (see with_hparams)
+    # vmappable (see with_hparams)
+    SWEEPABLE: ClassVar[tuple[str, ...]] = ("alpha", "tau", "policy_noise", "noise_clip")
 
     def __post_init__(self):
         validate_common(self)

@@ -68,7 +68,7 @@ class Dataset:
         std = (self.observations.std(0) + NORMALIZE_EPS).astype(np.float32)
         return mean, std
 
-    def select(self, rows: np.ndarray | slice) -> "Dataset":
+    def select(self, rows: np.ndarray | slice) -> Dataset:
         """A sub-dataset of the given rows (keeps metadata)."""
         arrays = {f: getattr(self, f)[rows] for f in ARRAY_FIELDS}
         return dataclasses.replace(self, **arrays)
@@ -79,7 +79,8 @@ def normalize_obs(obs: np.ndarray, mean: np.ndarray, std: np.ndarray) -> np.ndar
 
 
 def cache_dir() -> Path:
-    """Where generated datasets are cached: $OFFRL_JAX_CACHE, else $XDG_CACHE_HOME/offrl_jax, else ~/.cache/offrl_jax."""
+    """Where generated datasets are cached: $OFFRL_JAX_CACHE, else $XDG_CACHE_HOME/offrl_jax, else
+    ~/.cache/offrl_jax."""
     if os.environ.get("OFFRL_JAX_CACHE"):
         return Path(os.environ["OFFRL_JAX_CACHE"])
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")

@@ -16,8 +16,9 @@ The replay levels read the SAC run directory `cache_dir()/"sac"/<env>-seed<sac_s
 shipped checkpoints, if present); if it is missing it is trained there first (progress bar), up to the needed step.
 
 On disk: `out_dir/data/{main_data.hdf5, metadata.json}` written by `minari.create_dataset_from_buffers` (dataset id
-`<name>-v0`), plus `out_dir/offrl_jax.json` (env, policy checkpoint, seeds, D4RL reference scores, statistics).  Load
-with `minari.load_dataset(out_dir.name)` under `MINARI_DATASETS_PATH=out_dir.parent`, or `MinariDataset(out_dir/"data")`.
+`<name>-v0`), plus `out_dir/offrl_jax.json` (env, policy checkpoint, seeds, D4RL reference scores, statistics).
+Load with `minari.load_dataset(out_dir.name)` under `MINARI_DATASETS_PATH=out_dir.parent`, or
+`MinariDataset(out_dir/"data")`.
 """
 from __future__ import annotations
 
@@ -92,7 +93,8 @@ def _replay(env: str, level: str, n: int | None, progress: bool, run_dir: Path |
     policy_level = "medium" if level == "medium-replay" else "expert"
     meta = shipped_policies().get(f"{env}-{policy_level}")
     if meta is None:
-        raise FileNotFoundError(f"{env}-{level} needs the shipped {env}-{policy_level} checkpoint to know where to stop")
+        raise FileNotFoundError(f"{env}-{level} needs the shipped {env}-{policy_level} checkpoint "
+                                "to know where to stop")
     step, sac_seed = int(meta["sac_step"]), int(meta.get("sac_seed", 0))
     run_dir = Path(run_dir) if run_dir is not None else sac_run_dir(env, sac_seed)
     if not (run_dir / "run.json").exists():
@@ -197,7 +199,8 @@ def generate(name: str, transitions: int | None = None, out_dir: str | Path | No
     """Generate dataset `name` (e.g. "hopper-medium") and write it with minari; returns its directory.
 
     transitions: cap on the number of rows (default 1M per policy; the replay levels default to the whole run).
-    out_dir: the dataset directory (default `dataset_dir(name)`: `cache_dir()/"datasets"/<name>-v0`); an existing one raises unless overwrite.
+    out_dir: the dataset directory (default `dataset_dir(name)`: `cache_dir()/"datasets"/<name>-v0`); an existing
+        one raises unless overwrite.
     seed: env / action-noise seed of the rollouts.  sac_run: SAC run directory for the replay levels.
     """
     if name == "door-cloned":
