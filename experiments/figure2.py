@@ -1,16 +1,25 @@
 """Figure 2: hopper, halfcheetah, walker2d medium; TD3+BC and EDAC, each with and without pre-training.
 
-CPU-sized defaults (the paper runs 1M updates on a GPU): TD3+BC 100k updates (10k pre-training) and EDAC with 10
-critics for 30k updates (20k pre-training: 10k soft BC + 10k critic), 3 vmapped seeds.  EDAC's 10-critic updates run
-at ~40/s on 2 CPU cores, which is what bounds its budget here.  Each (env, algo) pair goes to its own sub-directory.
+CPU-sized defaults (the paper runs 1M updates on a GPU), 3 vmapped seeds: TD3+BC 30k updates (10k pre-training),
+evaluation every 2.5k (~25 min per env on 2 cores); EDAC with 10 critics for 12k updates (8k pre-training: 5k soft
+BC + 3k soft-return critic; `--pretrain-updates` / `--actor-pretrain-fraction` change it), evaluation every 1k.
+EDAC's 10-critic updates run at ~8/s per core for one seed, which is what bounds its budget: ~1.3 h per env on 2
+cores.  Each (env, algo) pair goes to its own sub-directory.
 
-    python -m experiments.figure2 [--envs hopper] [--algos td3bc] [--edac-updates 50000]
+    python -m experiments.figure2 [--envs hopper] [--algos td3bc] [--edac-updates 50000] [--seeds 2]
 """
 import sys
 
 from experiments.common import main_guard, positive_int
 from experiments.mujoco_medium import ENVS, LABELS, make_study, parser, pretrain_variants
 from offrl_jax.runner import Variant
+
+EDAC_PRETRAIN = {"pretrain_updates": 8_000, "actor_pretrain_fraction": 0.625}  # unless given on the command line
+
+
+def edac_overrides(overrides: dict, num_critics: int) -> dict:
+    pretrain = EDAC_PRETRAIN if overrides.get("pretrain", "none") != "none" else {}
+    return pretrain | overrides | {"num_critics": num_critics}
 
 
 def build(args):
@@ -20,9 +29,8 @@ def build(args):
             variants, extra = pretrain_variants(algo, args.pretrain, args), {}
             if algo == "edac":  # 10 critics on a CPU unless --num-critics says otherwise
                 n = args.num_critics or 10
-                variants = tuple(Variant.of(v.label, v.algo, **(dict(v.overrides) | {"num_critics": n}))
-                                 for v in variants)
-                extra = {"updates": args.edac_updates}
+                variants = tuple(Variant.of(v.label, v.algo, **edac_overrides(dict(v.overrides), n)) for v in variants)
+                extra = {"updates": args.edac_updates, "eval_every": args.edac_eval_every}
             studies.append(make_study(env, algo, args.level, args, extra=extra, variants=variants,
                                       reference=LABELS["none"] if "none" in args.pretrain else None,
                                       name=f"figure2-{env}-{algo}"))
@@ -30,10 +38,11 @@ def build(args):
 
 
 def make_parser():
-    p = parser("experiments.figure2", __doc__)
+    p = parser("experiments.figure2", __doc__, updates=30_000, eval_every=2_500)
     p.add_argument("--envs", nargs="+", choices=ENVS, default=list(ENVS))
     p.add_argument("--algos", nargs="+", choices=("td3bc", "edac"), default=["td3bc", "edac"])
-    p.add_argument("--edac-updates", type=positive_int, default=30_000)
+    p.add_argument("--edac-updates", type=positive_int, default=12_000, help="EDAC's budget (default %(default)s)")
+    p.add_argument("--edac-eval-every", type=positive_int, default=1_000, help="EDAC's evaluation interval")
     return p
 
 

@@ -1,7 +1,7 @@
 """Appendix B: LayerNorm in the actor only / critic only / both / neither (TD3+BC, no pre-training).
 
-Default: TD3+BC on hopper-medium and halfcheetah-medium, 3 vmapped seeds, 100k updates per variant (8 runs in all:
-about 2 hours on 2 CPU cores; pass --env to run one env).
+Default (sized for a 2-core CPU): TD3+BC on hopper-medium and halfcheetah-medium, 3 vmapped seeds, 20k updates per
+variant, evaluation every 2k (8 runs in all: ~1 hour on 2 cores; pass --env to run one env).  The paper: 1M updates.
 
     python -m experiments.layernorm [--env hopper] [--updates N]
 """
@@ -28,7 +28,7 @@ def build(args):
 
 
 def make_parser():
-    return parser("experiments.layernorm", __doc__, env=None)
+    return parser("experiments.layernorm", __doc__, updates=20_000, eval_every=2_000, env=None)
 
 
 def main(argv=None) -> int:

@@ -1,7 +1,8 @@
 """Appendix F: the Q-Transformer objective max(MC, r + gamma Q') throughout training vs our actor+critic
 pre-training vs neither (TD3+BC).
 
-Default: hopper-medium, 3 vmapped seeds, 100k updates per variant.
+Default (sized for a 2-core CPU, as run for RESULTS.md): hopper-medium, 3 vmapped seeds, 20k updates per variant,
+evaluation every 2k (~30 min on one core).  The paper: 1M updates.
 
     python -m experiments.qtransformer [--env walker2d] [--updates N]
 """
@@ -21,7 +22,7 @@ def build(args):
 
 
 def make_parser():
-    p = parser("experiments.qtransformer", __doc__)
+    p = parser("experiments.qtransformer", __doc__, updates=20_000, eval_every=2_000)
     p.set_defaults(algo="td3bc")
     return p
 

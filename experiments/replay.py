@@ -1,10 +1,11 @@
 """Appendix E: pre-training on the medium-replay and full-replay datasets (TD3+BC, with and without).
 
 These datasets come from the SAC training runs (`python -m offrl_jax.datasets generate hopper-medium-replay`
-trains SAC to the medium checkpoint first if it has not been run).  Default: hopper, both levels, 3 vmapped seeds,
-100k updates per variant.
+trains SAC to the medium checkpoint first if it has not been run).  Default (sized for a 2-core CPU): hopper
+medium-replay, 3 vmapped seeds, 30k updates per variant, evaluation every 2.5k.  full-replay is every transition of
+a 1M-step SAC run: `--levels medium-replay full-replay` trains it first if it is not cached (hours on a CPU).
 
-    python -m experiments.replay [--env walker2d] [--levels medium-replay]
+    python -m experiments.replay [--env walker2d] [--levels medium-replay full-replay]
 """
 import sys
 
@@ -18,9 +19,10 @@ def build(args):
 
 
 def make_parser():
-    p = parser("experiments.replay", __doc__)
+    p = parser("experiments.replay", __doc__, updates=30_000, eval_every=2_500)
     p.add_argument("--levels", nargs="+", choices=("medium-replay", "full-replay"),
-                   default=["medium-replay", "full-replay"])
+                   default=["medium-replay"],
+                   help="default medium-replay; full-replay needs a 1M-step SAC run (hours on a CPU)")
     return p
 
 

@@ -34,10 +34,18 @@ def test_figure2_and_replay():
     fig = build(figure2, [])
     assert len(fig) == 6
     edac = [s for s in fig if s.name == "figure2-walker2d-edac"][0]
-    assert edac.updates == 30_000 and dict(edac.variants[0].overrides)["num_critics"] == 10
-    reordered = {s.name: s for s in build(figure2, ["--algos", "edac", "td3bc", "--envs", "hopper"])}
-    assert dict(reordered["figure2-hopper-td3bc"].variants[0].overrides).get("num_critics") is None
-    assert [s.dataset for s in build(replay, [])] == ["hopper-medium-replay", "hopper-full-replay"]
+    pretrained, scratch = (dict(v.overrides) for v in edac.variants)
+    assert edac.updates == 12_000 and edac.eval_every == 1_000 and pretrained["num_critics"] == 10
+    assert pretrained["pretrain_updates"] == 8_000 and pretrained["actor_pretrain_fraction"] == 0.625
+    assert "pretrain_updates" not in scratch  # the EDAC pre-training defaults go to the pre-trained arm only
+    reordered = {s.name: s for s in build(figure2, ["--algos", "edac", "td3bc", "--envs", "hopper",
+                                                    "--pretrain-updates", "6000"])}
+    td3bc = reordered["figure2-hopper-td3bc"]
+    assert td3bc.updates == 30_000 and dict(td3bc.variants[0].overrides).get("num_critics") is None
+    assert dict(reordered["figure2-hopper-edac"].variants[0].overrides)["pretrain_updates"] == 6000  # flag wins
+    assert [s.dataset for s in build(replay, [])] == ["hopper-medium-replay"]
+    assert [s.dataset for s in build(replay, ["--levels", "medium-replay", "full-replay"])] == [
+        "hopper-medium-replay", "hopper-full-replay"]
 
 
 def test_preset_paper():
