@@ -187,8 +187,8 @@ class EDAC:
         q, diversity = self.q_and_diversity(params, batch)
         if pretraining:
             mc = state.soft_returns[batch["idx"]]
-            if cfg.lam == 0.0:
-                loss = L.mc_critic_loss(q, mc)
+            if cfg.lam == 0.0:  # the authors' EDAC pre-training averages over critics (the TD loss sums over them)
+                loss = L.mc_critic_loss(q, mc) / cfg.num_critics
             elif cfg.lambda_mode == "target":
                 loss = L.critic_regression_loss(q, L.mix_targets(mc, self.td_target(state, batch, k_target), cfg.lam))
             else:

@@ -1,0 +1,36 @@
+"""Loss conventions of the algorithms against the authors' code, on tiny networks."""
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from offrl_jax.algos import make_algorithm, make_config
+
+
+def tiny_batch(obs_dim=3, act_dim=2, batch=5, rows=7):
+    ks = jax.random.split(jax.random.PRNGKey(0), 4)
+    return {
+        "observations": jax.random.normal(ks[0], (batch, obs_dim)),
+        "actions": jnp.tanh(jax.random.normal(ks[1], (batch, act_dim))),
+        "next_observations": jax.random.normal(ks[2], (batch, obs_dim)),
+        "rewards": jax.random.normal(ks[3], (batch,)),
+        "terminals": jnp.array([0.0, 0.0, 1.0, 0.0, 0.0]),
+        "idx": jnp.array([0, 2, 4, 6, 1]),
+    }
+
+
+def test_edac_critic_losses_mean_over_critics_in_pretraining_and_sum_in_td():
+    """The authors' EDAC: pre-training MC loss ((q - R)^2).mean() over critics and batch; TD loss
+    ((q - y)^2).mean(dim=1).sum(dim=0) (CORL).  eta = 0 isolates the regression terms."""
+    cfg = make_config("edac", "hopper", num_critics=3, eta=0.0, hidden=(8, 8), lam=0.0)
+    algo = make_algorithm(cfg, 3, 2, 7)
+    state = algo.init(jax.random.PRNGKey(1))
+    state = state.replace(soft_returns=jnp.arange(7.0) * 10.0)
+    batch, key = tiny_batch(), jax.random.PRNGKey(2)
+    q = algo.critic.apply(state.critic.params, batch["observations"], batch["actions"])  # (3, 5)
+
+    pre, _ = algo.critic_loss(state.critic.params, state, batch, key, True)
+    np.testing.assert_allclose(pre, jnp.mean((q - state.soft_returns[batch["idx"]][None]) ** 2), rtol=1e-6)
+
+    td, _ = algo.critic_loss(state.critic.params, state, batch, key, False)
+    target = algo.td_target(state, batch, jax.random.split(key)[0])
+    np.testing.assert_allclose(td, jnp.sum(jnp.mean((q - target[None]) ** 2, axis=1)), rtol=1e-6)
