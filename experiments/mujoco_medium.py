@@ -40,6 +40,8 @@ def parser(prog: str = "experiments.mujoco_medium", doc: str = __doc__, updates:
     g.add_argument("--lambda-mode", choices=("loss", "target"), default=None)
     g.add_argument("--actor-ln", action=argparse.BooleanOptionalAction, default=None, help="LayerNorm in the actor")
     g.add_argument("--critic-ln", action=argparse.BooleanOptionalAction, default=None, help="LayerNorm in the critic")
+    g.add_argument("--ln-affine", action=argparse.BooleanOptionalAction, default=None,
+                   help="learned LayerNorm scale/bias (default on; --no-ln-affine = the authors' code, faster)")
     g.add_argument("--alpha", type=float, nargs="+", default=None,
                    help="TD3+BC alpha (default: per env); several values = a sweep, vmapped in one program")
     g.add_argument("--num-critics", type=int, default=None, help="EDAC/SAC-N ensemble size (default: per env)")
@@ -62,7 +64,7 @@ def overrides(args) -> dict:
             "critic_layer_norm": args.critic_ln, "alpha": args.alpha, "num_critics": args.num_critics,
             "eta": args.eta, "pretrain_updates": args.pretrain_updates, "actor_lr": args.actor_lr,
             "critic_lr": args.critic_lr, "hidden": tuple(args.hidden) if args.hidden else None,
-            "actor_pretrain_fraction": args.actor_pretrain_fraction}
+            "actor_pretrain_fraction": args.actor_pretrain_fraction, "layer_norm_affine": args.ln_affine}
 
 
 def build(args) -> Study | list[Study]:

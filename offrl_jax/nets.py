@@ -3,7 +3,8 @@
 Conventions
 - Observations are already normalised (see `offrl_jax.data.dataset.normalize_obs`); actions live in [-1, 1].
 - `layer_norm=True` puts a LayerNorm after every hidden linear layer, before the activation, never after the last
-  layer (the paper's setting, Section 5.1 / Appendix B).
+  layer (the paper's setting, Section 5.1 / Appendix B).  `layer_norm_affine=False` drops its learned scale and
+  bias, as the authors' code does (`nn.LayerNorm(256, elementwise_affine=False)`), and costs less on a CPU.
 - A critic ensemble of N members is one module whose parameters carry a leading axis N (`nn.vmap`), so TD3's twin
   critics (N = 2) and EDAC's N = 10..50 critics are the same code and evaluate as batched matmuls.
 """
@@ -25,13 +26,14 @@ class MLP(nn.Module):
     out_dim: int
     layer_norm: bool = True
     out_scale: float | None = None  # if set: final layer uniformly initialised in [-out_scale, out_scale] (EDAC/SAC-N)
+    layer_norm_affine: bool = True  # learned LayerNorm scale and bias (False: the authors' elementwise_affine=False)
 
     @nn.compact
     def __call__(self, x: jax.Array) -> jax.Array:
         for width in self.hidden:
             x = nn.Dense(width)(x)
             if self.layer_norm:
-                x = nn.LayerNorm()(x)
+                x = nn.LayerNorm(use_scale=self.layer_norm_affine, use_bias=self.layer_norm_affine)(x)
             x = nn.relu(x)
         if self.out_scale is None:
             return nn.Dense(self.out_dim)(x)
@@ -46,10 +48,11 @@ class DeterministicActor(nn.Module):
     act_dim: int
     hidden: Sequence[int] = (256, 256)
     layer_norm: bool = True
+    layer_norm_affine: bool = True
 
     @nn.compact
     def __call__(self, obs: jax.Array) -> jax.Array:
-        return jnp.tanh(MLP(self.hidden, self.act_dim, self.layer_norm)(obs))
+        return jnp.tanh(MLP(self.hidden, self.act_dim, self.layer_norm, layer_norm_affine=self.layer_norm_affine)(obs))
 
 
 class TanhGaussianActor(nn.Module):
@@ -61,10 +64,11 @@ class TanhGaussianActor(nn.Module):
     act_dim: int
     hidden: Sequence[int] = (256, 256, 256)
     layer_norm: bool = True
+    layer_norm_affine: bool = True
 
     @nn.compact
     def __call__(self, obs: jax.Array) -> tuple[jax.Array, jax.Array]:
-        out = MLP(self.hidden, 2 * self.act_dim, self.layer_norm, out_scale=1e-3)(obs)
+        out = MLP(self.hidden, 2 * self.act_dim, self.layer_norm, 1e-3, self.layer_norm_affine)(obs)
         mean, log_std = jnp.split(out, 2, axis=-1)
         return mean, jnp.clip(log_std, LOG_STD_MIN, LOG_STD_MAX)
 
@@ -98,11 +102,12 @@ class Critic(nn.Module):
     hidden: Sequence[int] = (256, 256)
     layer_norm: bool = True
     out_scale: float | None = None
+    layer_norm_affine: bool = True
 
     @nn.compact
     def __call__(self, obs: jax.Array, act: jax.Array) -> jax.Array:
         x = jnp.concatenate([obs, act], axis=-1)
-        return MLP(self.hidden, 1, self.layer_norm, self.out_scale)(x)[..., 0]
+        return MLP(self.hidden, 1, self.layer_norm, self.out_scale, self.layer_norm_affine)(x)[..., 0]
 
 
 class CriticEnsemble(nn.Module):
@@ -117,6 +122,7 @@ class CriticEnsemble(nn.Module):
     layer_norm: bool = True
     out_scale: float | None = None
     per_member_actions: bool = False
+    layer_norm_affine: bool = True
 
     @nn.compact
     def __call__(self, obs: jax.Array, act: jax.Array) -> jax.Array:
@@ -128,4 +134,4 @@ class CriticEnsemble(nn.Module):
             out_axes=0,
             axis_size=self.num,
         )
-        return ensemble(self.hidden, self.layer_norm, self.out_scale)(obs, act)
+        return ensemble(self.hidden, self.layer_norm, self.out_scale, self.layer_norm_affine)(obs, act)

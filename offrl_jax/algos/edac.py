@@ -50,6 +50,7 @@ class EDACConfig:
     hidden: tuple[int, ...] = (256, 256, 256)
     actor_layer_norm: bool = True
     critic_layer_norm: bool = True
+    layer_norm_affine: bool = True  # learned LN scale/bias; False = the authors' code (elementwise_affine=False)
     init_alpha: float = 1.0
     backup_entropy: bool = True  # subtract alpha log pi(a'|s') in the TD target
     bc_weight: float = 0.0  # EDAC+BC: actor loss = SAC/sg|SAC| + bc_weight * MSE/sg|MSE| (0 = off)
@@ -86,9 +87,9 @@ class EDACState:
 class EDAC:
     def __init__(self, config: EDACConfig, obs_dim: int, act_dim: int, num_transitions: int):
         self.cfg, self.obs_dim, self.act_dim, self.num_transitions = config, obs_dim, act_dim, num_transitions
-        self.actor = TanhGaussianActor(act_dim, config.hidden, config.actor_layer_norm)
+        self.actor = TanhGaussianActor(act_dim, config.hidden, config.actor_layer_norm, config.layer_norm_affine)
         critic_kw = dict(num=config.num_critics, hidden=config.hidden, layer_norm=config.critic_layer_norm,
-                         out_scale=3e-3)
+                         out_scale=3e-3, layer_norm_affine=config.layer_norm_affine)
         self.critic = CriticEnsemble(**critic_kw)
         self.critic_per_member = CriticEnsemble(**critic_kw, per_member_actions=True)  # same parameters
         self.actor_tx, self.critic_tx = optax.adam(config.actor_lr), optax.adam(config.critic_lr)

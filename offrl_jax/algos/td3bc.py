@@ -52,6 +52,7 @@ class TD3BCConfig:
     hidden: tuple[int, ...] = (256, 256)
     actor_layer_norm: bool = True
     critic_layer_norm: bool = True
+    layer_norm_affine: bool = True  # learned LN scale/bias; False = the authors' code (elementwise_affine=False)
     num_critics: int = 2
     # TD3+BC+CQL: critic loss = TD/sg|TD| + cql_weight * CQL/sg|CQL| (0 = off)
     cql_weight: float = 0.0
@@ -85,9 +86,12 @@ class TD3BCState:
 class TD3BC:
     def __init__(self, config: TD3BCConfig, obs_dim: int, act_dim: int):
         self.cfg, self.obs_dim, self.act_dim = config, obs_dim, act_dim
-        self.actor = DeterministicActor(act_dim, config.hidden, config.actor_layer_norm)
-        self.critic = CriticEnsemble(config.num_critics, config.hidden, config.critic_layer_norm)
-        self.first_critic = CriticEnsemble(1, config.hidden, config.critic_layer_norm)  # member 0's parameters only
+        affine = config.layer_norm_affine
+        self.actor = DeterministicActor(act_dim, config.hidden, config.actor_layer_norm, affine)
+        self.critic = CriticEnsemble(config.num_critics, config.hidden, config.critic_layer_norm,
+                                     layer_norm_affine=affine)
+        self.first_critic = CriticEnsemble(1, config.hidden, config.critic_layer_norm,  # member 0's parameters only
+                                           layer_norm_affine=affine)
         self.actor_tx = optax.adam(config.actor_lr)
         self.critic_tx = optax.adam(config.critic_lr)
 
