@@ -34,3 +34,11 @@ def test_edac_critic_losses_mean_over_critics_in_pretraining_and_sum_in_td():
     td, _ = algo.critic_loss(state.critic.params, state, batch, key, False)
     target = algo.td_target(state, batch, jax.random.split(key)[0])
     np.testing.assert_allclose(td, jnp.sum(jnp.mean((q - target[None]) ** 2, axis=1)), rtol=1e-6)
+
+
+def test_cql_baseline_follows_the_authors_configs():
+    """configs/cql/{door,pen}/human_v1.yaml: cql_min_q_weight 10, policy_lr 3e-5, qf_lr 3e-4, no entropy backup."""
+    for env in ("door", "pen", "hopper"):
+        cfg = make_config("cql", env)
+        assert (cfg.cql_alpha, cfg.actor_lr, cfg.critic_lr, cfg.backup_entropy) == (10.0, 3e-5, 3e-4, False)
+        assert cfg.num_critics == 2 and cfg.pretrain == "none"

@@ -23,8 +23,9 @@ ALGOS: dict[str, tuple[type, dict[str, Any]]] = {
     "edac": (EDACConfig, {}),
     "sacn": (EDACConfig, {"eta": 0.0}),
     "edac_bc": (EDACConfig, {"bc_weight": 1.0}),
+    # the authors' CQL configs (CORL): cql_min_q_weight 10, policy_lr 3e-5, no entropy in the backup
     "cql": (EDACConfig, {"num_critics": 2, "eta": 0.0, "cql_alpha": 10.0, "backup_entropy": False,
-                         "pretrain": "none"}),
+                         "pretrain": "none", "actor_lr": 3e-5}),
 }
 
 ADROIT = ("pen", "door", "hammer", "relocate")
@@ -51,8 +52,6 @@ def env_defaults(algo: str, env: str, dataset: str = "") -> dict[str, Any]:
         d["pretrain_updates"] = 200_000 if env in ADROIT else 20_000
         if env in ("halfcheetah", "walker2d"):
             d["lam"] = 0.1
-        if algo == "cql" and env in ADROIT:
-            d["cql_alpha"] = 1.0
     return d
 
 
