@@ -38,7 +38,9 @@ def table(summary: list[dict]) -> str:
     for s in summary:
         u = "never" if s["updates_to_90pct"] is None else f"{s['updates_to_90pct']:,}"
         t = "never" if s["seconds_to_90pct"] is None else f"{s['seconds_to_90pct']:.0f}"
-        lines.append(f"| {s['variant']} | {s['final_score_mean']:.1f} ± {s['final_score_ci95']:.1f} | {u} | {t} | "
+        gone = s.get("seeds_diverged") or []  # older summaries lack the key
+        variant = s["variant"] + (f" ({len(gone)} seed(s) diverged, not in the mean)" if gone else "")
+        lines.append(f"| {variant} | {s['final_score_mean']:.1f} ± {s['final_score_ci95']:.1f} | {u} | {t} | "
                      f"{s['pretrain_updates']:,} |")
     return "\n".join(lines)
 

@@ -18,6 +18,7 @@ import math
 import sys
 import threading
 import time
+import warnings
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
@@ -267,12 +268,20 @@ def write_curves(path: Path, rows: list[dict]) -> None:
 T95 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306, 9: 2.262, 10: 2.228}
 
 
+def t975(df: int) -> float:
+    """Student-t 97.5 % quantile: exact table to df = 10, then the Cornish-Fisher expansion (error < 0.1 %)."""
+    if df in T95:
+        return T95[df]
+    z = 1.959964
+    return z + (z**3 + z) / (4 * df) + (5 * z**5 + 16 * z**3 + 3 * z) / (96 * df**2)
+
+
 def ci95(values: np.ndarray) -> float:
-    """Half-width of the 95 % t-interval of the mean (0 for a single value)."""
+    """Half-width of the 95 % t-interval of the mean of the finite values (0 for a single value)."""
     values = values[np.isfinite(values)]
     if len(values) < 2:
         return 0.0
-    return float(T95.get(len(values) - 1, 1.96) * values.std(ddof=1) / math.sqrt(len(values)))
+    return float(t975(len(values) - 1) * values.std(ddof=1) / math.sqrt(len(values)))
 
 
 def score_matrix(rows: list[dict], label: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -300,7 +309,9 @@ def summarize(study: Study, rows: list[dict], pretrain_ends: dict[str, int]) -> 
             keep = (updates >= study.final_window[0]) & (updates <= study.final_window[1])
         else:
             keep = np.arange(len(updates)) >= len(updates) - max(1, int(round(0.1 * len(updates))))
-        finals[v.label] = np.nanmean(scores[:, keep], axis=1) if keep.any() else np.full(len(study.seeds), np.nan)
+        with warnings.catch_warnings():  # a diverged seed's window is all NaN: its final is NaN, no warning
+            warnings.simplefilter("ignore", RuntimeWarning)
+            finals[v.label] = np.nanmean(scores[:, keep], axis=1) if keep.any() else np.full(len(study.seeds), np.nan)
     reference = study.reference or study.variants[-1].label
     asymptote = float(np.nanmean(finals[reference])) if reference in finals else float("nan")
     trend = _trend(np.nanmean(score_matrix(rows, reference)[2], axis=0)) if reference in finals else None
@@ -321,6 +332,8 @@ def summarize(study: Study, rows: list[dict], pretrain_ends: dict[str, int]) -> 
             "updates_to_90pct": int(updates[reached[0]]) if len(reached) else None,
             "seconds_to_90pct": float(seconds[reached[0]]) if len(reached) else None,
             "pretrain_updates": pretrain_ends.get(v.label, 0),
+            # seeds whose final score is not finite (diverged and stopped): the mean and CI above leave them out
+            "seeds_diverged": [seed for seed, f in zip(study.seeds, finals[v.label]) if not np.isfinite(f)],
             "overrides": dict(v.overrides),
         })
     return summary
@@ -367,4 +380,6 @@ def print_table(summary: list[dict]) -> None:
     for s in summary:
         u = "never" if s["updates_to_90pct"] is None else f"{s['updates_to_90pct']:,}"
         t = "never" if s["seconds_to_90pct"] is None else f"{s['seconds_to_90pct']:.0f}"
-        print(f"{s['variant']:<24} {s['final_score_mean']:>8.1f} ± {s['final_score_ci95']:<5.1f} {u:>15} {t:>15}")
+        gone = s.get("seeds_diverged") or []
+        note = f"  ({len(gone)} seed(s) diverged, left out: {gone})" if gone else ""
+        print(f"{s['variant']:<24} {s['final_score_mean']:>8.1f} ± {s['final_score_ci95']:<5.1f} {u:>15} {t:>15}{note}")

@@ -54,3 +54,23 @@ def test_report_curve_table_is_the_seed_mean_per_evaluation(tmp_path):
     lines = curve_table(tmp_path / "curves.csv").splitlines()
     assert lines[0] == "| updates | 1k | 2k |"
     assert lines[2] == "| a | 15.0 | 40.0 |" and lines[3] == "| b |  | 7.0 |"
+
+
+def test_diverged_seed_is_named_and_ci_uses_the_t_quantile():
+    import math
+
+    import numpy as np
+
+    from offrl_jax.runner import ci95, t975
+
+    study = Study(name="t", dataset="hopper-medium", env="hopper", seeds=(0, 1, 2), updates=2000, eval_every=1000,
+                  variants=(Variant.of("scratch", "td3bc", pretrain="none"),), reference="scratch")
+    nan = float("nan")
+    (s,) = summarize(study, rows_of("scratch", [[10, 20], [30, nan], [50, 60]]), {})
+    assert s["seeds_diverged"] == [1] and s["final_score_mean"] == 40.0  # (20 + 60) / 2: seed 1 is left out
+    # t quantiles: the table to df 10, then within 0.1 % of the exact values (df 11: 2.201, 30: 2.042, 100: 1.984)
+    assert t975(3) == 3.182
+    for df, exact in ((11, 2.2010), (30, 2.0423), (100, 1.9840)):
+        assert abs(t975(df) - exact) / exact < 1e-3
+    values = np.arange(12.0)
+    assert ci95(values) == pytest.approx(t975(11) * values.std(ddof=1) / math.sqrt(12))
