@@ -67,8 +67,26 @@ def test_d4rl_without_next_observations_or_timeouts(tmp_path):
     for end in (14, 29, 39):  # no recorded successor: the row's own observation
         np.testing.assert_array_equal(ds.next_observations[end], obs[end])
     del arrays["timeouts"]
-    ds = read_d4rl_hdf5(write_h5(tmp_path / "no_timeouts.hdf5", arrays))
+    with pytest.warns(UserWarning, match="inferred 0 time-outs at hopper's 1000-step limit"):
+        ds = read_d4rl_hdf5(write_h5(tmp_path / "no_timeouts.hdf5", arrays))
     assert ds.timeouts.sum() == 0 and ds.terminals.sum() == 1
+
+
+def test_d4rl_without_timeouts_gets_them_at_the_time_limit(tmp_path):
+    """Old D4RL files have no `timeouts`: a time-out after every 1000 rows without a terminal, so halfcheetah-like
+    data (no terminals at all) is not read as one endless episode."""
+    arrays = d4rl_arrays(T=2600, seed=1)
+    arrays["terminals"][:] = False
+    arrays["terminals"][1500] = True  # resets the step count: the next time-out is 1000 rows later
+    del arrays["timeouts"]
+    with pytest.warns(UserWarning, match="inferred 2 time-outs"):
+        ds = read_d4rl_hdf5(write_h5(tmp_path / "hopper-old.hdf5", arrays))
+    assert list(np.flatnonzero(ds.timeouts)) == [999, 2500]
+    ambiguous = d4rl_arrays(T=30, obs_dim=17, act_dim=6)  # halfcheetah or walker2d, and no name hint
+    del ambiguous["timeouts"]
+    with pytest.warns(UserWarning, match="env is unknown"):
+        ds = read_d4rl_hdf5(write_h5(tmp_path / "data.hdf5", ambiguous))
+    assert ds.timeouts.sum() == 0
 
 
 def test_env_inference():

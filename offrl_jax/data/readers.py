@@ -153,17 +153,40 @@ def read_d4rl_hdf5(path, env: str | None = None, clip_actions: bool = False) -> 
     for key in D4RL_REQUIRED:
         if key not in data:
             raise DatasetError(f"{path}: missing key '{key}' (found: {', '.join(sorted(data)) or 'none'})")
-    data.setdefault("timeouts", np.zeros(len(data["rewards"]), np.float32))
-    check_lengths(path, {k: data[k] for k in (*D4RL_REQUIRED, "timeouts", "next_observations") if k in data})
+    check_lengths(path, {k: data[k] for k in (*D4RL_REQUIRED, "next_observations") if k in data})
+    if env is None and np.ndim(data["observations"]) == 2 and np.ndim(data["actions"]) == 2:
+        env = infer_env(data["observations"].shape[1], data["actions"].shape[1], hints=(path.stem,))
+    if "timeouts" not in data:
+        data["timeouts"] = infer_timeouts(path, np.ravel(data["terminals"]), env)
+    check_lengths(path, {k: data[k] for k in (*D4RL_REQUIRED, "timeouts")})
     if "next_observations" not in data and len(data["rewards"]) > 0:
         ends = (np.ravel(data["terminals"]) != 0) | (np.ravel(data["timeouts"]) != 0)
         data["next_observations"] = next_within_episode(np.asarray(data["observations"]), ends)
     data.setdefault("next_observations", data["observations"])  # empty: validate reports it
     ds = Dataset(**{k: data[k] for k in ("observations", "actions", "rewards", "next_observations", "terminals",
                                          "timeouts")}, name=path.stem, source=str(path))
-    if env is None and np.ndim(data["observations"]) == 2 and np.ndim(data["actions"]) == 2:
-        env = infer_env(data["observations"].shape[1], data["actions"].shape[1], hints=(path.stem,))
     return validate(ds, path, env=env, clip_actions=clip_actions)
+
+
+def infer_timeouts(path, terminals: np.ndarray, env: str | None) -> np.ndarray:
+    """Time-outs for a file without a `timeouts` key (D4RL v0/v1 files): a time-out after every `max_episode_steps`
+    rows without a terminal, as D4RL's own `get_dataset` users did (CORL's `return_reward_range`).  Without a known
+    env there is no time limit to use: all zeros, with a warning that episodes may then run into each other."""
+    timeouts = np.zeros(len(terminals), np.float32)
+    if env is None:
+        warnings.warn(f"{path}: no 'timeouts' key and the env is unknown: episodes end only at terminals", stacklevel=3)
+        return timeouts
+    limit = ENVS[env].max_episode_steps
+    steps = 0
+    for i, terminal in enumerate(terminals != 0):
+        steps += 1
+        if terminal:
+            steps = 0
+        elif steps == limit:
+            timeouts[i], steps = 1.0, 0
+    warnings.warn(f"{path}: no 'timeouts' key: inferred {int(timeouts.sum())} time-outs at {env}'s {limit}-step "
+                  "limit", stacklevel=3)
+    return timeouts
 
 
 # ------------------------------------------------------------------------------------------------------- Minari
