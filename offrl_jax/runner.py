@@ -77,6 +77,8 @@ class Study:
         labels = [v.label for v in self.variants]
         if not labels or len(set(labels)) != len(labels):
             raise ValueError(f"Study.variants need unique labels, got {labels}")
+        if self.reference is not None and not any(reference_label(self, label) for label in labels):
+            raise ValueError(f"Study.reference = {self.reference!r} is not a variant label ({', '.join(labels)})")
         get_env_spec(self.env)
         for v in self.variants:  # every variant's hyper-parameters are checked before anything runs or is written
             make_config(v.algo, self.env, self.dataset, **dict(v.overrides))
@@ -298,10 +300,22 @@ def score_matrix(rows: list[dict], label: str) -> tuple[np.ndarray, np.ndarray, 
     return updates, seconds, scores
 
 
+def reference_label(study: Study, label: str) -> str | None:
+    """The from-scratch variant `label` is measured against: `study.reference` (default: the last variant), or in a
+    sweep, where labels end in " alpha=2.5" etc., the reference with the same value ("scratch alpha=2.5")."""
+    reference = study.reference or study.variants[-1].label
+    labels = {v.label for v in study.variants}
+    if reference in labels:
+        return reference
+    last = label.rsplit(" ", 1)[-1]
+    swept = reference + " " + last if " " in label and "=" in last else None
+    return swept if swept in labels else None
+
+
 def summarize(study: Study, rows: list[dict], pretrain_ends: dict[str, int]) -> list[dict]:
     """Per variant: final score (per seed, the mean of the last 10 % of evaluations, or of those inside
     `final_window`; then mean and 95 % CI over seeds), the from-scratch asymptote, and the first evaluation at which
-    the seed-mean reaches 90 % of it."""
+    the seed-mean reaches 90 % of it (in a sweep: of the reference with the same swept value)."""
     finals = {}
     for v in study.variants:
         updates, _, scores = score_matrix(rows, v.label)
@@ -312,11 +326,11 @@ def summarize(study: Study, rows: list[dict], pretrain_ends: dict[str, int]) -> 
         with warnings.catch_warnings():  # a diverged seed's window is all NaN: its final is NaN, no warning
             warnings.simplefilter("ignore", RuntimeWarning)
             finals[v.label] = np.nanmean(scores[:, keep], axis=1) if keep.any() else np.full(len(study.seeds), np.nan)
-    reference = study.reference or study.variants[-1].label
-    asymptote = float(np.nanmean(finals[reference])) if reference in finals else float("nan")
-    trend = _trend(np.nanmean(score_matrix(rows, reference)[2], axis=0)) if reference in finals else None
     summary = []
     for v in study.variants:
+        reference = reference_label(study, v.label)
+        asymptote = float(np.nanmean(finals[reference])) if reference else float("nan")
+        trend = _trend(np.nanmean(score_matrix(rows, reference)[2], axis=0)) if reference else None
         updates, seconds, scores = score_matrix(rows, v.label)
         reached = np.flatnonzero(np.nanmean(scores, axis=0) >= 0.9 * asymptote) if len(updates) else []
         config = make_config(v.algo, study.env, study.dataset, **dict(v.overrides))

@@ -74,3 +74,24 @@ def test_diverged_seed_is_named_and_ci_uses_the_t_quantile():
         assert abs(t975(df) - exact) / exact < 1e-3
     values = np.arange(12.0)
     assert ci95(values) == pytest.approx(t975(11) * values.std(ddof=1) / math.sqrt(12))
+
+
+def test_unknown_reference_label_is_refused():
+    with pytest.raises(ValueError, match="reference = 'scrach' is not a variant label"):
+        Study(name="t", dataset="hopper-medium", env="hopper", seeds=(0,), updates=10, eval_every=5,
+              variants=(Variant.of("scratch", "td3bc", pretrain="none"),), reference="scrach")
+
+
+def test_sweep_variants_are_measured_against_the_scratch_run_with_the_same_value():
+    labels = ["pretrained alpha=1", "pretrained alpha=2", "scratch alpha=1", "scratch alpha=2"]
+    study = Study(name="t", dataset="hopper-medium", env="hopper", seeds=(0,), updates=2000, eval_every=1000,
+                  variants=tuple(Variant.of(label, "td3bc", alpha=float(label[-1]),
+                                            pretrain="none" if label.startswith("scratch") else "actor+critic")
+                                 for label in labels), reference="scratch")
+    finals = {"pretrained alpha=1": 50, "pretrained alpha=2": 60, "scratch alpha=1": 40, "scratch alpha=2": 80}
+    rows = [r for label, final in finals.items() for r in rows_of(label, [[final / 2, final]])]
+    summary = {s["variant"]: s for s in summarize(study, rows, {})}
+    assert summary["pretrained alpha=1"]["asymptote"] == 40 and summary["pretrained alpha=2"]["asymptote"] == 80
+    # curves [25, 50] against 0.9 * 40 = 36: reached at 2000; [30, 60] against 0.9 * 80 = 72: never
+    assert summary["pretrained alpha=1"]["updates_to_90pct"] == 2000
+    assert summary["pretrained alpha=2"]["updates_to_90pct"] is None
