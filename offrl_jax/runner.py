@@ -332,7 +332,8 @@ def summarize(study: Study, rows: list[dict], pretrain_ends: dict[str, int]) -> 
         asymptote = float(np.nanmean(finals[reference])) if reference else float("nan")
         trend = _trend(np.nanmean(score_matrix(rows, reference)[2], axis=0)) if reference else None
         updates, seconds, scores = score_matrix(rows, v.label)
-        reached = np.flatnonzero(np.nanmean(scores, axis=0) >= 0.9 * asymptote) if len(updates) else []
+        threshold = asymptote - 0.1 * abs(asymptote)  # 90 % of a positive asymptote; below a negative one too
+        reached = np.flatnonzero(np.nanmean(scores, axis=0) >= threshold) if len(updates) else []
         config = make_config(v.algo, study.env, study.dataset, **dict(v.overrides))
         summary.append({
             "variant": v.label, "env": study.env, "dataset": study.dataset, "algo": v.algo,

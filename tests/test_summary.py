@@ -95,3 +95,13 @@ def test_sweep_variants_are_measured_against_the_scratch_run_with_the_same_value
     # curves [25, 50] against 0.9 * 40 = 36: reached at 2000; [30, 60] against 0.9 * 80 = 72: never
     assert summary["pretrained alpha=1"]["updates_to_90pct"] == 2000
     assert summary["pretrained alpha=2"]["updates_to_90pct"] is None
+
+
+def test_ninety_percent_of_a_negative_asymptote_lies_below_it():
+    """Adroit scores can be negative: 90 % of -10 must be reached at -11, not demanded at -9 (above the asymptote)."""
+    study = Study(name="t", dataset="door-human", env="door", seeds=(0,), updates=2000, eval_every=1000,
+                  variants=(Variant.of("pre", "td3bc"), Variant.of("scratch", "td3bc", pretrain="none")),
+                  reference="scratch")
+    rows = rows_of("pre", [[-11.0, -10.5]]) + rows_of("scratch", [[-20.0, -10.0]])
+    summary = {s["variant"]: s for s in summarize(study, rows, {})}
+    assert summary["scratch"]["asymptote"] == -10.0 and summary["pre"]["updates_to_90pct"] == 1000
