@@ -35,8 +35,8 @@ def test_figure2_and_replay():
     assert len(fig) == 6
     edac = [s for s in fig if s.name == "figure2-walker2d-edac"][0]
     pretrained, scratch = (dict(v.overrides) for v in edac.variants)
-    assert edac.updates == 12_000 and edac.eval_every == 1_000 and pretrained["num_critics"] == 10
-    assert pretrained["pretrain_updates"] == 8_000 and pretrained["actor_pretrain_fraction"] == 0.625
+    assert edac.updates == 16_000 and edac.eval_every == 1_000 and pretrained["num_critics"] == 10
+    assert pretrained["pretrain_updates"] == 12_000 and pretrained["actor_pretrain_fraction"] == 0.25
     assert "pretrain_updates" not in scratch  # the EDAC pre-training defaults go to the pre-trained arm only
     reordered = {s.name: s for s in build(figure2, ["--algos", "edac", "td3bc", "--envs", "hopper",
                                                     "--pretrain-updates", "6000"])}
