@@ -153,12 +153,11 @@ def read_d4rl_hdf5(path, env: str | None = None, clip_actions: bool = False) -> 
     for key in D4RL_REQUIRED:
         if key not in data:
             raise DatasetError(f"{path}: missing key '{key}' (found: {', '.join(sorted(data)) or 'none'})")
-    check_lengths(path, {k: data[k] for k in (*D4RL_REQUIRED, "next_observations") if k in data})
     if env is None and np.ndim(data["observations"]) == 2 and np.ndim(data["actions"]) == 2:
         env = infer_env(data["observations"].shape[1], data["actions"].shape[1], hints=(path.stem,))
     if "timeouts" not in data:
         data["timeouts"] = infer_timeouts(path, np.ravel(data["terminals"]), env)
-    check_lengths(path, {k: data[k] for k in (*D4RL_REQUIRED, "timeouts")})
+    check_lengths(path, {k: data[k] for k in (*D4RL_REQUIRED, "timeouts", "next_observations") if k in data})
     if "next_observations" not in data and len(data["rewards"]) > 0:
         ends = (np.ravel(data["terminals"]) != 0) | (np.ravel(data["timeouts"]) != 0)
         data["next_observations"] = next_within_episode(np.asarray(data["observations"]), ends)
