@@ -28,20 +28,34 @@ def summaries(path: Path) -> list[Path]:
 
 
 def table(summary: list[dict]) -> str:
+    """One markdown table.  In a sweep each variant has its own reference (the scratch run with the same swept
+    value), so when the asymptotes differ they get a column instead of the header."""
     first = summary[0]
+    asymptotes = {round(s["asymptote"], 6) for s in summary if s["asymptote"] == s["asymptote"]}
+    per_variant = len(asymptotes) > 1
     trend = first.get("asymptote_trend")
-    head = (f"{first['dataset']}, {len(first['seeds'])} seeds, {first['updates']:,} updates per variant; asymptote "
-            f"(from-scratch final) {first['asymptote']:.1f}"
-            + (f", its trend over the last 20 % of evaluations {trend:+.1f}" if trend is not None else ""))
-    lines = [head, "", "| variant | final score | updates to 90 % | seconds to 90 % | pre-training updates |",
-             "|---|--:|--:|--:|--:|"]
+    head = f"{first['dataset']}, {len(first['seeds'])} seeds, {first['updates']:,} updates per variant"
+    if per_variant:
+        head += "; asymptote (final of the from-scratch run with the same swept value) per variant"
+    else:
+        head += (f"; asymptote (from-scratch final) {first['asymptote']:.1f}"
+                 + (f", its trend over the last 20 % of evaluations {trend:+.1f}" if trend is not None else ""))
+    cols = "| variant | final score | updates to 90 % | seconds to 90 % | pre-training updates |"
+    rule = "|---|--:|--:|--:|--:|"
+    if per_variant:
+        cols, rule = cols + " asymptote (trend) |", rule + "--:|"
+    lines = [head, "", cols, rule]
     for s in summary:
         u = "never" if s["updates_to_90pct"] is None else f"{s['updates_to_90pct']:,}"
         t = "never" if s["seconds_to_90pct"] is None else f"{s['seconds_to_90pct']:.0f}"
         gone = s.get("seeds_diverged") or []  # older summaries lack the key
         variant = s["variant"] + (f" ({len(gone)} seed(s) diverged, not in the mean)" if gone else "")
-        lines.append(f"| {variant} | {s['final_score_mean']:.1f} ± {s['final_score_ci95']:.1f} | {u} | {t} | "
-                     f"{s['pretrain_updates']:,} |")
+        row = (f"| {variant} | {s['final_score_mean']:.1f} ± {s['final_score_ci95']:.1f} | {u} | {t} | "
+               f"{s['pretrain_updates']:,} |")
+        if per_variant:
+            tr = s.get("asymptote_trend")
+            row += f" {s['asymptote']:.1f}" + (f" ({tr:+.1f})" if tr is not None else "") + " |"
+        lines.append(row)
     return "\n".join(lines)
 
 

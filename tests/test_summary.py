@@ -105,3 +105,18 @@ def test_ninety_percent_of_a_negative_asymptote_lies_below_it():
     rows = rows_of("pre", [[-11.0, -10.5]]) + rows_of("scratch", [[-20.0, -10.0]])
     summary = {s["variant"]: s for s in summarize(study, rows, {})}
     assert summary["scratch"]["asymptote"] == -10.0 and summary["pre"]["updates_to_90pct"] == 1000
+
+
+def test_report_gives_each_swept_variant_its_own_asymptote():
+    from experiments.report import table
+
+    base = {"dataset": "hopper-medium", "seeds": [0], "updates": 2000, "final_score_ci95": 0.0,
+            "updates_to_90pct": None, "seconds_to_90pct": None, "pretrain_updates": 0, "asymptote_trend": None}
+    summary = [dict(base, variant="pre alpha=1", final_score_mean=50.0, asymptote=40.0),
+               dict(base, variant="scratch alpha=1", final_score_mean=40.0, asymptote=40.0),
+               dict(base, variant="scratch alpha=5", final_score_mean=20.0, asymptote=20.0)]
+    lines = table(summary).splitlines()
+    assert "per variant" in lines[0] and lines[2].endswith("asymptote (trend) |")
+    assert lines[-1] == "| scratch alpha=5 | 20.0 ± 0.0 | never | never | 0 | 20.0 |"
+    # one shared asymptote stays in the header, with no extra column
+    assert "asymptote (from-scratch final) 40.0" in table(summary[:2]).splitlines()[0]
