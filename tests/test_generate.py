@@ -158,3 +158,33 @@ def test_default_cache_dir_is_a_minari_id_that_minari_lists(tmp_path, monkeypatc
     assert minari.load_dataset("hopper-medium-v0").total_steps == 1000
     out.rename(tmp_path / "datasets" / "hopper-medium")  # a cache from before the -v0 suffix is moved, not redone
     assert dataset_dir("hopper-medium") == out and (out / "data" / "metadata.json").is_file()
+
+
+@needs_medium
+def test_ship_expert_picks_the_best_stochastic_of_the_top_candidates(tmp_path):
+    """The top-2 train-eval checkpoints are re-run stochastically; the better one ships even though its train eval
+    was lower, and a checkpoint outside the top 2 is never evaluated."""
+    import shutil
+
+    import flax
+
+    from offrl_jax.data.generate.collect import actor_module
+    from offrl_jax.data.generate.ship import ship
+
+    run = tmp_path / "run"
+    (run / "checkpoints").mkdir(parents=True)
+    weak = actor_module(3, (256, 256)).init(jax.random.PRNGKey(0), np.zeros((1, 11), np.float32))
+    (run / "checkpoints" / "a.msgpack").write_bytes(flax.serialization.to_bytes(weak))  # untrained: falls at once
+    shutil.copyfile(POLICY_DIR / shipped_policies()["hopper-medium"]["file"], run / "checkpoints" / "b.msgpack")
+    log = [{"step": 1000, "eval_return": 900.0, "normalized_score": 28.4, "checkpoint": "checkpoints/a.msgpack"},
+           {"step": 2000, "eval_return": 800.0, "normalized_score": 25.3, "checkpoint": "checkpoints/b.msgpack"},
+           {"step": 3000, "eval_return": 5.0, "normalized_score": 0.8, "checkpoint": "checkpoints/missing.msgpack"},
+           {"step": 4000, "eval_return": 1.0, "normalized_score": 0.7, "checkpoint": "checkpoints/b.msgpack"}]
+    (run / "log.jsonl").write_text("\n".join(json.dumps(e) for e in log) + "\n")
+    (run / "run.json").write_text(json.dumps({"env": "hopper", "gym_id": "Hopper-v5", "seed": 0}))
+    record = ship(run, "expert", episodes=2, dest=tmp_path / "policies", candidates=2)
+    assert record["sac_step"] == 2000 and record["level"] == "expert"
+    assert record["selection"].startswith("best stochastic return (2 episodes) of the 2 checkpoints")
+    assert "2k" in record["selection"] and "1k" in record["selection"] and "4k" not in record["selection"]
+    assert (tmp_path / "policies" / "hopper-expert.msgpack").exists()
+    assert "hopper-expert" in json.loads((tmp_path / "policies" / "policies.json").read_text())

@@ -3,7 +3,9 @@
     python -m offrl_jax.data.generate.ship --run ~/.cache/offrl_jax/sac/hopper-seed0 --level medium [--step N]
 
 medium: the checkpoint whose (5-episode, deterministic) eval normalised score during training is closest to D4RL's
-medium behaviour score (`MEDIUM_TARGET_SCORE`); expert: the checkpoint with the best eval return.  The chosen actor is
+medium behaviour score (`MEDIUM_TARGET_SCORE`).  expert: the `--candidates` checkpoints with the best training eval
+return are re-evaluated with `--episodes` *stochastic* episodes each, and the best of those is shipped (a 5-episode
+deterministic eval overrates some checkpoints: hopper's best three scored 72-86 stochastically).  The chosen actor is
 re-evaluated with more episodes, deterministic and stochastic (the stochastic score is what the dataset will show),
 copied to `policies/<env>-<level>.msgpack` and described in `policies/policies.json`.
 """
@@ -39,13 +41,33 @@ def select_checkpoint(run_dir: str | Path, level: str, env: str) -> dict[str, An
     raise ValueError(f"level must be medium or expert, got {level}")
 
 
+def rank_expert_candidates(run_dir: str | Path, env: str, candidates: int = 5, episodes: int = 20,
+                           seed: int = 321) -> list[dict[str, Any]]:
+    """The `candidates` log entries with the best training eval return, each with "stochastic_return" (mean of
+    `episodes` stochastic episodes) added, best stochastic return first."""
+    log = [e for e in read_log(run_dir) if (Path(run_dir) / e["checkpoint"]).exists()]
+    if not log:
+        raise FileNotFoundError(f"no evaluated checkpoints in {run_dir}")
+    ranked = []
+    for e in sorted(log, key=lambda e: e["eval_return"], reverse=True)[:candidates]:
+        params, meta = load_policy(Path(run_dir) / e["checkpoint"])
+        sto = evaluate(env, params, episodes, seed=seed, deterministic=False, hidden=tuple(meta["hidden"]),
+                       num_envs=10)
+        ranked.append({**e, "stochastic_return": float(sto.mean())})
+    return sorted(ranked, key=lambda e: e["stochastic_return"], reverse=True)
+
+
 def ship(run_dir: str | Path, level: str, step: int | None = None, episodes: int = 20, seed: int = 123,
-         dest: Path = POLICY_DIR, note: str | None = None) -> dict[str, Any]:
+         dest: Path = POLICY_DIR, note: str | None = None, candidates: int = 5) -> dict[str, Any]:
     """Copy the chosen checkpoint of `run_dir` to `dest/<env>-<level>.msgpack` and record it in policies.json."""
     run_dir = Path(run_dir)
     run = json.loads((run_dir / "run.json").read_text())
     env = run["env"]
-    if step is None:
+    ranked = None
+    if step is None and level == "expert":
+        ranked = rank_expert_candidates(run_dir, env, candidates, episodes)
+        entry = ranked[0]
+    elif step is None:
         entry = select_checkpoint(run_dir, level, env)
     else:
         entry = next(e for e in read_log(run_dir) if e["step"] == step)
@@ -71,7 +93,10 @@ def ship(run_dir: str | Path, level: str, step: int | None = None, episodes: int
         "stochastic_normalized_score": round(float(normalized_score(env, sto.mean())), 2),
         "selection": ("closest train-eval score to D4RL medium target "
                       f"{MEDIUM_TARGET_SCORE[env]}" if level == "medium" and step is None
-                      else "best train-eval return" if step is None else "chosen by hand")
+                      else f"best stochastic return ({episodes} episodes) of the {len(ranked)} checkpoints with the "
+                      "best train-eval return: " + ", ".join(f"{e['step'] // 1000}k {e['stochastic_return']:.0f}"
+                                                             for e in ranked)
+                      if ranked else "chosen by hand")
         + (f"; {note}" if note else ""),
         "size_bytes": (dest / f"{name}.msgpack").stat().st_size,
     }
@@ -88,6 +113,8 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--level", required=True, choices=["medium", "expert"])
     p.add_argument("--step", type=int, default=None, help="ship this checkpoint instead of the automatic choice")
     p.add_argument("--episodes", type=int, default=20, help="verification episodes")
+    p.add_argument("--candidates", type=int, default=5,
+                   help="expert: how many of the best train-eval checkpoints to re-evaluate stochastically")
     p.add_argument("--note", default=None, help="why this checkpoint (recorded in policies.json)")
     p.add_argument("--list", action="store_true", help="only print the run's evaluations and the automatic choice")
     a = p.parse_args(argv)
@@ -98,7 +125,7 @@ def main(argv: list[str] | None = None) -> None:
                   f"returns {np.round(e['eval_returns']).astype(int).tolist()}")
         print("choice:", select_checkpoint(a.run, a.level, run["env"])["step"])
         return
-    print(json.dumps(ship(a.run, a.level, a.step, a.episodes, note=a.note), indent=1))
+    print(json.dumps(ship(a.run, a.level, a.step, a.episodes, note=a.note, candidates=a.candidates), indent=1))
 
 
 if __name__ == "__main__":
