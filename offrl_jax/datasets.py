@@ -27,7 +27,7 @@ _LOCOMOTION_KINDS = {
     "random": "uniformly random actions",
     "medium": "a policy at about 1/3 of expert return",
     "medium-replay": "the replay buffer of training up to the medium policy",
-    "full-replay": "the whole replay buffer of training up to the expert policy",
+    "full-replay": "the whole replay buffer of the SAC run that trained the expert policy",
     "expert": "the expert policy",
     "medium-expert": "medium and expert halves concatenated",
 }

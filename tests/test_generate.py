@@ -45,7 +45,7 @@ def test_sac_update_reduces_critic_loss():
     assert 0.0 < float(info["alpha"]) < 1.0
 
 
-def test_sac_short_training_run(tmp_path):
+def test_sac_short_training_run(tmp_path, monkeypatch):
     run = train("hopper", 300, tmp_path, seed=0, cfg=TINY, eval_every=150, eval_episodes=1, progress=False,
                 max_episode_steps=50)
     assert run["steps_done"] == 300 and run["stopped"] == "finished"
@@ -60,6 +60,16 @@ def test_sac_short_training_run(tmp_path):
     assert len(load_replay(tmp_path, upto=150)["rewards"]) == 150
     params, meta = load_policy(tmp_path / "checkpoints" / "actor_0000300.msgpack")
     assert meta["hidden"] == [32, 32] and meta["obs_dim"] == 11 and meta["act_dim"] == 3
+    # medium-replay stops at the medium checkpoint's step; full-replay is the whole run of the expert
+    import offrl_jax.data.generate as gen
+
+    fake = {"hopper-medium": {"sac_step": 150, "sac_seed": 0, "file": "m"},
+            "hopper-expert": {"sac_step": 150, "sac_seed": 0, "sac_run_steps": 300, "file": "e"}}
+    monkeypatch.setattr(gen, "shipped_policies", lambda: fake)
+    medium_replay, src = gen.build("hopper-medium-replay", sac_run=tmp_path, progress=False)
+    full_replay, _ = gen.build("hopper-full-replay", sac_run=tmp_path, progress=False)
+    assert len(medium_replay) == 150 and src["upto_step"] == 150 and len(full_replay) == 300
+    assert medium_replay.timeouts[-1] + medium_replay.terminals[-1] == 1  # the cut episode ends there
 
 
 def test_sac_resume_continues_from_the_last_saved_state(tmp_path):

@@ -10,7 +10,8 @@ Levels (D4RL's definitions, our SAC behaviour policies; see docs/datasets.md):
     expert          the shipped expert SAC actor, stochastic actions, 1M
     medium-expert   medium ++ expert (same seeds, so it is the two datasets concatenated), 2M
     medium-replay   every transition the SAC run saw up to the medium checkpoint's step
-    full-replay     every transition the SAC run saw up to the expert checkpoint's step
+    full-replay     every transition of the whole SAC run that produced the expert checkpoint (D4RL: the final replay
+                    buffer of a policy trained to completion, 1M steps)
 
 The replay levels read the SAC run directory `cache_dir()/"sac"/<env>-seed<sac_seed>` (the run that produced the
 shipped checkpoints, if present); if it is missing it is trained there first (progress bar), up to the needed step.
@@ -95,7 +96,9 @@ def _replay(env: str, level: str, n: int | None, progress: bool, run_dir: Path |
     if meta is None:
         raise FileNotFoundError(f"{env}-{level} needs the shipped {env}-{policy_level} checkpoint "
                                 "to know where to stop")
-    step, sac_seed = int(meta["sac_step"]), int(meta.get("sac_seed", 0))
+    sac_seed = int(meta.get("sac_seed", 0))
+    # medium-replay stops at the medium checkpoint; full-replay is the whole run (recorded when the expert shipped)
+    step = int(meta["sac_step"] if level == "medium-replay" else meta.get("sac_run_steps", meta["sac_step"]))
     run_dir = Path(run_dir) if run_dir is not None else sac_run_dir(env, sac_seed)
     if not (run_dir / "run.json").exists():
         print(f"[generate] no SAC run in {run_dir}: training {env} for {step} steps (seed {sac_seed})")

@@ -82,6 +82,7 @@ def ship(run_dir: str | Path, level: str, step: int | None = None, episodes: int
     record = {
         "file": f"{name}.msgpack", "env": env, "gym_id": run["gym_id"], "level": level,
         "sac_step": int(entry["step"]), "sac_seed": int(run["seed"]),
+        "sac_run_steps": int(run.get("steps_done", entry["step"])),  # full-replay takes the whole run
         "obs_dim": meta["obs_dim"], "act_dim": meta["act_dim"], "hidden": list(hidden), "layer_norm": False,
         "train_eval_return": round(float(entry["eval_return"]), 1),
         "train_eval_normalized_score": round(float(entry["normalized_score"]), 2),
