@@ -148,13 +148,15 @@ def _parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
     sub.add_parser("list", help="known dataset names and which are cached")
     info = sub.add_parser("info", help="one JSON line describing a dataset (name, file, directory or Minari id)")
-    info.add_argument("dataset")
+    info.add_argument("dataset", help="a known name (hopper-medium, door-human, ...), a D4RL .hdf5 file, a Minari "
+                      "dataset directory or id, or the door .npz")
     info.add_argument("--clip-actions", action="store_true", default=None, help="clip actions outside [-1, 1]")
     gen = sub.add_parser("generate", help="generate a known dataset into the cache (or --out)")
-    gen.add_argument("name")
-    gen.add_argument("--transitions", type=int, default=None)
-    gen.add_argument("--out", type=Path, default=None)
-    gen.add_argument("--seed", type=int, default=0)
+    gen.add_argument("name", help="a generated name from `list` (e.g. hopper-medium, walker2d-expert, door-cloned)")
+    gen.add_argument("--transitions", type=int, default=None,
+                     help="cap on the number of transitions (default: 1M per policy; the whole run for replay levels)")
+    gen.add_argument("--out", type=Path, default=None, help="dataset directory (default: the cache, see `list`)")
+    gen.add_argument("--seed", type=int, default=0, help="seed of the rollouts (envs and action noise)")
     return parser
 
 
