@@ -52,6 +52,18 @@ def seed_keys(seeds: tuple[int, ...], stream: int, index: int) -> jax.Array:
 INIT, CHUNK, PHASE_START = 0, 1, 2  # key streams
 
 
+def check_call_grid(phases: list[Phase], chunk_updates: int) -> None:
+    """A phase making k > 1 updates per call (TD3's delayed actor) must start, end and be evaluated on multiples of
+    k; otherwise chunks would drift off the evaluation grid.  Raises ValueError naming the numbers."""
+    start = 0
+    for p in phases:
+        k = p.updates_per_call
+        if k > 1 and (start % k or p.steps % k or chunk_updates % k):
+            raise ValueError(f"phase '{p.name}' makes {k} updates per call, so its start ({start}), its length "
+                             f"({p.steps}) and the evaluation interval ({chunk_updates}) must be multiples of {k}")
+        start += p.steps
+
+
 def make_chunk_fn(phase: Phase, batch_size: int, num_calls: int,
                   phase_for: Callable[[dict[str, jax.Array]], Phase] | None = None) -> Callable:
     """jit(vmap(scan of `num_calls` update calls)): (states (S..), data, keys (S, 2)) -> (states, metrics (S, ...)).
@@ -167,6 +179,7 @@ class Driver:
 
         `states`/`start_update`/`seconds` resume a run from a checkpoint taken at a chunk boundary.
         """
+        check_call_grid(phases, chunk_updates)
         states = self.init() if states is None else self.shard(states)
         total = sum(p.steps for p in phases)
         extra = () if self.hparams is None else (self.hparams,)

@@ -42,3 +42,29 @@ def test_cql_baseline_follows_the_authors_configs():
         cfg = make_config("cql", env)
         assert (cfg.cql_alpha, cfg.actor_lr, cfg.critic_lr, cfg.backup_entropy) == (10.0, 3e-5, 3e-4, False)
         assert cfg.num_critics == 2 and cfg.pretrain == "none"
+
+
+def test_edac_target_mode_is_continuous_at_lambda_zero():
+    """lambda_mode="target" regresses on one mixed target; as lam -> 0 it must tend to the lam = 0 MC loss (both
+    averaged over critics), not to N times it."""
+    losses = {}
+    for lam, mode in ((0.0, "loss"), (1e-7, "target")):
+        cfg = make_config("edac", "hopper", num_critics=3, eta=0.0, hidden=(8, 8), lam=lam, lambda_mode=mode)
+        algo = make_algorithm(cfg, 3, 2, 7)
+        state = algo.init(jax.random.PRNGKey(1)).replace(soft_returns=jnp.arange(7.0) * 10.0)
+        losses[mode], _ = algo.critic_loss(state.critic.params, state, tiny_batch(), jax.random.PRNGKey(2), True)
+    np.testing.assert_allclose(losses["target"], losses["loss"], rtol=1e-4)
+
+
+def test_driver_refuses_an_evaluation_grid_off_the_delayed_update():
+    import pytest
+
+    from offrl_jax.algos.common import Phase
+    from offrl_jax.driver import check_call_grid
+
+    step = lambda *a: a  # noqa: E731  (never called)
+    check_call_grid([Phase("pretrain", step, 1000), Phase("offline_rl", step, 2000, updates_per_call=2)], 500)
+    with pytest.raises(ValueError, match="start \\(1001\\)"):
+        check_call_grid([Phase("pretrain", step, 1001), Phase("offline_rl", step, 2000, updates_per_call=2)], 500)
+    with pytest.raises(ValueError, match="evaluation interval \\(501\\)"):
+        check_call_grid([Phase("offline_rl", step, 2000, updates_per_call=2)], 501)

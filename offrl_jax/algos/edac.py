@@ -190,8 +190,9 @@ class EDAC:
             mc = state.soft_returns[batch["idx"]]
             if cfg.lam == 0.0:  # the authors' EDAC pre-training averages over critics (the TD loss sums over them)
                 loss = L.mc_critic_loss(q, mc) / cfg.num_critics
-            elif cfg.lambda_mode == "target":
-                loss = L.critic_regression_loss(q, L.mix_targets(mc, self.td_target(state, batch, k_target), cfg.lam))
+            elif cfg.lambda_mode == "target":  # a regression on one target: averaged over critics like lam = 0
+                target = L.mix_targets(mc, self.td_target(state, batch, k_target), cfg.lam)
+                loss = L.critic_regression_loss(q, target) / cfg.num_critics
             else:
                 td_loss = L.critic_regression_loss(q, self.td_target(state, batch, k_target))
                 loss = L.mix_losses(L.mc_critic_loss(q, mc), td_loss, cfg.lam)
