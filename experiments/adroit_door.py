@@ -7,7 +7,8 @@ mean of the evaluations between 200k and 300k updates, over 4 seeds (mean +- std
 count by the same factor for a CPU (default 0.1: 30k updates, 20k pre-training, window 20k-30k, evaluation every
 1k); `--scale 1` is the paper's protocol.  EDAC(+BC) uses the paper's 50 critics and eta 200 unless told otherwise.
 
-    python -m experiments.adroit_door [--dataset door-human] [--algos bc td3bc_cql] [--scale 1] [--seeds 4]
+    python -m experiments.adroit_door [--dataset door-human] [--variants BC "pre-trained TD3+BC+CQL"] [--scale 1]
+        [--seeds 4]
 """
 import sys
 

@@ -124,7 +124,11 @@ def main(argv: list[str] | None = None) -> None:
         for e in read_log(a.run):
             print(f"{e['step']:>8d}  eval {e['eval_return']:8.1f}  norm {e['normalized_score']:6.1f}  "
                   f"returns {np.round(e['eval_returns']).astype(int).tolist()}")
-        print("choice:", select_checkpoint(a.run, a.level, run["env"])["step"])
+        if a.level == "expert":  # the choice needs the stochastic re-evaluation that `ship` runs
+            top = sorted(read_log(a.run), key=lambda e: e["eval_return"], reverse=True)[:a.candidates]
+            print("candidates (ship re-evaluates them stochastically):", [e["step"] for e in top])
+        else:
+            print("choice:", select_checkpoint(a.run, a.level, run["env"])["step"])
         return
     print(json.dumps(ship(a.run, a.level, a.step, a.episodes, note=a.note, candidates=a.candidates), indent=1))
 
