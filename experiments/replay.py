@@ -3,7 +3,8 @@
 These datasets come from the SAC training runs (`python -m offrl_jax.datasets generate hopper-medium-replay`
 trains SAC to the medium checkpoint first if it has not been run).  Default (sized for a 2-core CPU): hopper
 medium-replay, 3 vmapped seeds, 30k updates per variant, evaluation every 2.5k.  full-replay is every transition of
-a 1M-step SAC run: `--levels medium-replay full-replay` trains it first if it is not cached (hours on a CPU).
+the 1M-step SAC run that produced the shipped `<env>-expert` checkpoint: it needs that checkpoint, and reads the run
+from the cache (or trains it first: hours on a CPU).
 
     python -m experiments.replay [--env walker2d] [--levels medium-replay full-replay]
 """
@@ -22,7 +23,7 @@ def make_parser():
     p = parser("experiments.replay", __doc__, updates=30_000, eval_every=2_500)
     p.add_argument("--levels", nargs="+", choices=("medium-replay", "full-replay"),
                    default=["medium-replay"],
-                   help="default medium-replay; full-replay needs a 1M-step SAC run (hours on a CPU)")
+                   help="default medium-replay; full-replay needs a shipped <env>-expert and its 1M-step SAC run")
     return p
 
 
