@@ -6,7 +6,19 @@ An algorithm is a frozen config plus pure functions:
     phases(total_updates) -> list[Phase]                     (pre-training phases, then offline RL)
     act(state, obs) -> action                                (deterministic policy for evaluation)
 Each `Phase.update(state, batch, key) -> (state, metrics)` is one scan body; batch leaves are (k, B, ...) with
-k = `Phase.updates_per_call` minibatches (k = 2 for TD3's delayed actor update).
+k = `Phase.updates_per_call` minibatches (k = 2 for TD3's delayed actor update).  `single` / `first` hand a loss the
+(B, ...) minibatch.
+
+A minibatch (`Batch`: `driver.DATA_FIELDS` drawn uniformly from `driver.device_data`, plus `idx`), for B rows:
+    observations       (B, obs_dim)  normalised with the dataset mean / std
+    actions            (B, act_dim)  in [-1, 1]
+    rewards            (B,)
+    next_observations  (B, obs_dim)  normalised
+    terminals          (B,)          1.0 at a true terminal only, so TD targets bootstrap through time-outs
+    timeouts           (B,)          1.0 where the time limit cut an episode
+    returns            (B,)          Monte-Carlo discounted return-to-go (`offrl_jax.data.returns.returns_to_go`)
+    idx                (B,)          the rows' dataset indices: EDAC reads its soft returns `state.soft_returns[idx]`,
+                                     which depend on the pre-trained actor and so live in the state, not the data
 """
 from __future__ import annotations
 

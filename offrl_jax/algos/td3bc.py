@@ -161,7 +161,9 @@ class TD3BC:
 
     def actor_loss(self, params, state, batch: Batch):
         pi = self.actor.apply(params, batch["observations"])
-        first = jax.tree.map(lambda p: p[:1], state.critic.params)  # TD3 uses Q_1 alone for the actor
+        # TD3 uses Q_1 alone for the actor.  Slice member 0's parameters and apply a 1-member ensemble, rather than
+        # `self.critic.apply(...)[0]`: the actor's gradient then runs through one critic, not all of them.
+        first = jax.tree.map(lambda p: p[:1], state.critic.params)
         q = self.first_critic.apply(first, batch["observations"], pi)[0]
         loss = L.td3bc_actor_loss(q, pi, batch["actions"], self.cfg.alpha)
         return loss, {"actor_loss": loss, "bc_mse": L.bc_loss(pi, batch["actions"])}
