@@ -5,6 +5,8 @@ Shapes: B = batch, A = action dim, N = ensemble size, M = sampled actions per st
 """
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import jax
 import jax.numpy as jnp
 
@@ -94,6 +96,23 @@ def balance_losses(primary: jax.Array, auxiliary: jax.Array, weight: float) -> j
 def mix_losses(mc_loss: jax.Array, td_loss: jax.Array, lam: float) -> jax.Array:
     """The authors' lambda mixing on normalised losses: (1-lam) L_MC/sg|L_MC| + lam L_TD/sg|L_TD|.  (), () -> ()."""
     return (1.0 - lam) * normalized(mc_loss) + lam * normalized(td_loss)
+
+
+def pretrain_critic_loss(q: jax.Array, mc_return: jax.Array, td_fn: Callable[[], jax.Array], lam: float,
+                         mode: str = "loss", per_critic: str = "sum") -> jax.Array:
+    """Critic pre-training on Monte-Carlo returns, with a share lam of TD (eq. 5).  q: (N, B), mc_return: (B,) -> ().
+
+    lam = 0: the MC error alone (`td_fn` is not called).  mode "target": regression on (1 - lam) R + lam y;
+    mode "loss": `mix_losses` of the MC and TD errors (the authors').  `td_fn() -> (B,)` gives the TD target y.
+    per_critic: "sum" (TD3+BC's twin critics) or "mean" (EDAC's ensemble, as the authors' `pretrain_soft_critic`)
+    over the N critics; normalised losses ("loss" mode, lam > 0) are the same either way.
+    """
+    scale = 1.0 if per_critic == "sum" else 1.0 / q.shape[0]
+    if lam == 0.0:
+        return scale * mc_critic_loss(q, mc_return)
+    if mode == "target":
+        return scale * critic_regression_loss(q, mix_targets(mc_return, td_fn(), lam))
+    return mix_losses(mc_critic_loss(q, mc_return), critic_regression_loss(q, td_fn()), lam)
 
 
 # ---------------------------------------------------------------------------------------------------- actor losses

@@ -76,6 +76,24 @@ def test_mix_losses():
     A(grads, (0.1875, 0.125), rtol=1e-6)
 
 
+def test_pretrain_critic_loss_modes():
+    # q = [[1, 3], [2, 2]] (2 critics, batch 2), R = [1, 1], y = [3, 1]
+    q, mc, td = jnp.array([[1.0, 3.0], [2.0, 2.0]]), jnp.array([1.0, 1.0]), jnp.array([3.0, 1.0])
+
+    def never():
+        raise AssertionError("lam = 0 must not compute the TD target")
+
+    # lam = 0: MC error per critic (0 + 4) / 2 = 2 and (1 + 1) / 2 = 1 -> sum 3, mean 1.5
+    A(L.pretrain_critic_loss(q, mc, never, 0.0), 3.0)
+    A(L.pretrain_critic_loss(q, mc, never, 0.0, per_critic="mean"), 1.5)
+    # target mode, lam = 0.5: target [2, 1]; errors (1 + 4) / 2 = 2.5 and (0 + 1) / 2 = 0.5 -> sum 3, mean 1.5
+    A(L.pretrain_critic_loss(q, mc, lambda: td, 0.5, "target"), 3.0)
+    A(L.pretrain_critic_loss(q, mc, lambda: td, 0.5, "target", per_critic="mean"), 1.5)
+    # loss mode: normalised, so 0.5 * 1 + 0.5 * 1 = 1 whatever the reduction over critics
+    A(L.pretrain_critic_loss(q, mc, lambda: td, 0.5), 1.0)
+    A(L.pretrain_critic_loss(q, mc, lambda: td, 0.5, per_critic="mean"), 1.0)
+
+
 def test_td3bc_actor_loss():
     # q = [2, 4]: lmbda = 2.5 / mean|q| = 2.5/3; -lmbda * 3 = -2.5; MSE([[0],[0]], [[1],[0]]) = 0.5 -> -2.0
     loss = L.td3bc_actor_loss(jnp.array([2.0, 4.0]), jnp.zeros((2, 1)), jnp.array([[1.0], [0.0]]), 2.5)

@@ -186,19 +186,13 @@ class EDAC:
         cfg = self.cfg
         k_target, k_cql = jax.random.split(key)
         q, diversity = self.q_and_diversity(params, batch)
-        if pretraining:
+        td_fn = lambda: self.td_target(state, batch, k_target)  # noqa: E731
+        if pretraining:  # the authors' EDAC pre-training averages over critics; its TD loss (below) sums over them
             mc = state.soft_returns[batch["idx"]]
-            if cfg.lam == 0.0:  # the authors' EDAC pre-training averages over critics (the TD loss sums over them)
-                loss = L.mc_critic_loss(q, mc) / cfg.num_critics
-            elif cfg.lambda_mode == "target":  # a regression on one target: averaged over critics like lam = 0
-                target = L.mix_targets(mc, self.td_target(state, batch, k_target), cfg.lam)
-                loss = L.critic_regression_loss(q, target) / cfg.num_critics
-            else:
-                td_loss = L.critic_regression_loss(q, self.td_target(state, batch, k_target))
-                loss = L.mix_losses(L.mc_critic_loss(q, mc), td_loss, cfg.lam)
+            loss = L.pretrain_critic_loss(q, mc, td_fn, cfg.lam, cfg.lambda_mode, per_critic="mean")
             metrics = {"mc_error": jnp.mean((q - mc[None]) ** 2)}
         else:
-            loss = L.critic_regression_loss(q, self.td_target(state, batch, k_target))
+            loss = L.critic_regression_loss(q, td_fn())
             metrics = {}
         metrics |= {"critic_loss": loss, "q_mean": jnp.mean(q), "diversity": diversity}
         if cfg.cql_alpha > 0:

@@ -141,17 +141,12 @@ class TD3BC:
         k_target, k_cql = jax.random.split(key)
         q = self.critic.apply(params, batch["observations"], batch["actions"])  # (N, B)
         mc = batch["returns"]
-        if pretraining and cfg.lam == 0.0:
-            loss = L.mc_critic_loss(q, mc)
+        td_fn = lambda: self.td_target(state, batch, k_target)  # noqa: E731
+        if pretraining:
+            loss = L.pretrain_critic_loss(q, mc, td_fn, cfg.lam, cfg.lambda_mode)
         else:
-            td = self.td_target(state, batch, k_target)
-            if not pretraining:
-                target = L.q_transformer_target(mc, td) if cfg.target == "max_mc" else td
-                loss = L.critic_regression_loss(q, target)
-            elif cfg.lambda_mode == "target":
-                loss = L.critic_regression_loss(q, L.mix_targets(mc, td, cfg.lam))
-            else:
-                loss = L.mix_losses(L.mc_critic_loss(q, mc), L.critic_regression_loss(q, td), cfg.lam)
+            target = L.q_transformer_target(mc, td_fn()) if cfg.target == "max_mc" else td_fn()
+            loss = L.critic_regression_loss(q, target)
         metrics = {"critic_loss": loss, "q_mean": jnp.mean(q), "mc_error": jnp.mean((q[0] - mc) ** 2)}
         if cfg.cql_weight > 0:
             penalty = self.cql_penalty(params, batch, q, k_cql)
