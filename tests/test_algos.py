@@ -41,7 +41,8 @@ def test_cql_baseline_follows_the_authors_configs():
     for env in ("door", "pen", "hopper"):
         cfg = make_config("cql", env)
         assert (cfg.cql_alpha, cfg.actor_lr, cfg.critic_lr, cfg.backup_entropy) == (10.0, 3e-5, 3e-4, False)
-        assert cfg.num_critics == 2 and cfg.pretrain == "none"
+        assert cfg.num_critics == 2 and cfg.pretrain == "none" and cfg.simultaneous_update
+    assert not make_config("edac", "hopper").simultaneous_update
 
 
 def test_edac_target_mode_is_continuous_at_lambda_zero():
@@ -68,3 +69,19 @@ def test_driver_refuses_an_evaluation_grid_off_the_delayed_update():
         check_call_grid([Phase("pretrain", step, 1001), Phase("offline_rl", step, 2000, updates_per_call=2)], 500)
     with pytest.raises(ValueError, match="evaluation interval \\(501\\)"):
         check_call_grid([Phase("offline_rl", step, 2000, updates_per_call=2)], 501)
+
+
+def test_cql_update_computes_every_loss_from_the_incoming_state():
+    """CORL's cql.py: the critic's loss uses the actor and temperature from before the step, so the simultaneous
+    update's critic loss is exactly a critic-only step's from the same state; EDAC's sequential one is not."""
+    batch, key = tiny_batch(), jax.random.PRNGKey(3)
+    for simultaneous in (True, False):
+        cfg = make_config("cql", "door", hidden=(8, 8), simultaneous_update=simultaneous, cql_actions=2)
+        algo = make_algorithm(cfg, 3, 2, 7)
+        state = algo.init(jax.random.PRNGKey(1))
+        new, metrics = algo.rl_update(state, batch, key)
+        _, alone = algo.td_update(state, batch, jax.random.split(key, 3)[2])
+        assert {"alpha_loss", "actor_loss", "critic_loss", "cql_penalty"} <= set(metrics)
+        assert (float(metrics["critic_loss"]) == float(alone["critic_loss"])) == simultaneous
+        kernel = lambda s: s.actor.params["params"]["MLP_0"]["Dense_0"]["kernel"]  # noqa: E731
+        assert not np.allclose(kernel(new), kernel(state))  # the actor did step

@@ -25,7 +25,7 @@ ALGOS: dict[str, tuple[type, dict[str, Any]]] = {
     "edac_bc": (EDACConfig, {"bc_weight": 1.0}),
     # the authors' CQL configs (CORL): cql_min_q_weight 10, policy_lr 3e-5, no entropy in the backup
     "cql": (EDACConfig, {"num_critics": 2, "eta": 0.0, "cql_alpha": 10.0, "backup_entropy": False,
-                         "pretrain": "none", "actor_lr": 3e-5}),
+                         "pretrain": "none", "actor_lr": 3e-5, "simultaneous_update": True}),
 }
 
 ADROIT = ("pen", "door", "hammer", "relocate")

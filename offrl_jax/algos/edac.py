@@ -63,6 +63,9 @@ class EDACConfig:
     lam: float = 0.0
     lambda_mode: Literal["loss", "target"] = "loss"
     entropy_batch: int = 16_384  # rows per batch when computing the per-state entropies for the soft returns
+    # CQL (CORL's cql.py): temperature, actor and critic losses all from the state before the update; False = EDAC
+    # (CORL's edac.py): temperature, then actor, then critic, each seeing the step before
+    simultaneous_update: bool = False
 
     SWEEPABLE: ClassVar[tuple[str, ...]] = ("eta", "tau")  # vmappable in one program (see common.with_hparams)
 
@@ -247,5 +250,10 @@ class EDAC:
         return state.replace(critic=polyak(critic, self.cfg.tau)), metrics
 
     def rl_update(self, state: EDACState, batch: Batch, key: jax.Array):
-        """CORL's order: temperature, actor, critic (+ target), all on one minibatch."""
-        return chain(self.temperature_update, self.actor_update, self.td_update)(state, batch, key)
+        """CORL's order: temperature, actor, critic (+ target), all on one minibatch; with `simultaneous_update`
+        (CQL) every loss is computed from the incoming state and the three steps are applied together."""
+        updates = (self.temperature_update, self.actor_update, self.td_update)
+        if not self.cfg.simultaneous_update:
+            return chain(*updates)(state, batch, key)
+        (t, m_t), (a, m_a), (c, m_c) = (fn(state, batch, k) for fn, k in zip(updates, jax.random.split(key, 3)))
+        return state.replace(log_alpha=t.log_alpha, actor=a.actor, critic=c.critic), m_t | m_a | m_c
