@@ -146,7 +146,10 @@ def edac_diversity_loss(action_grads: jax.Array) -> jax.Array:
     action_grads: (N, B, A), the gradient of each member's Q at the dataset action -> ().  Multiply by eta outside.
     """
     n = action_grads.shape[0]
-    g = action_grads / (jnp.linalg.norm(action_grads, axis=-1, keepdims=True) + 1e-10)
+    # ||g|| with a zero-safe gradient: d||g||/dg at g = 0 is NaN in JAX (torch's norm, in the authors' code, gives 0)
+    sq = jnp.sum(action_grads**2, axis=-1, keepdims=True)
+    norm = jnp.where(sq > 0, jnp.sqrt(jnp.where(sq > 0, sq, 1.0)), 0.0)
+    g = action_grads / (norm + 1e-10)
     gram = jnp.einsum("iba,jba->bij", g, g)  # (B, N, N)
     off_diagonal = jnp.sum(gram, axis=(1, 2)) - jnp.trace(gram, axis1=1, axis2=2)
     return jnp.mean(off_diagonal) / (n - 1)

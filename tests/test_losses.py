@@ -125,6 +125,13 @@ def test_edac_diversity_loss(grads, expected):
     A(L.edac_diversity_loss(jnp.array(grads)), expected, rtol=1e-6)
 
 
+def test_edac_diversity_gradient_is_finite_at_a_zero_action_gradient():
+    grads = jnp.array([[[0.0, 0.0]], [[1.0, 0.0]]])  # member 0's dQ/da is exactly zero
+    d = jax.grad(L.edac_diversity_loss)(grads)
+    assert np.all(np.isfinite(d))
+    A(L.edac_diversity_loss(grads), 0.0, atol=1e-12)
+
+
 def test_cql_uniform_penalty():
     # logsumexp(0, ln 3) = ln 4; q_data = ln 4 - 1 -> penalty 1 (one critic, one state)
     q_u = jnp.array([[[0.0, np.log(3.0)]]])
