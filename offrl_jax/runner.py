@@ -3,7 +3,9 @@ between scan chunks, with atomic results, checkpoints every N updates, `resume`,
 
 Output directory:
     config.json      the study (enough to resume it)
-    curves.csv       variant, seed, phase, update, seconds, score, every logged metric
+    curves.csv       variant, seed, phase, update, seconds, score, every logged metric; `seconds` is the variant's
+                     training wall-clock so far: its jitted chunks including their XLA compilation, excluding the
+                     evaluations (so a run stopped with SIGSTOP, or sharing its core, shows longer seconds)
     summary.json     one object per variant (see `summarize`)
     curves.png       mean and 95 % CI per variant against updates, pre-training end marked
     checkpoints/     <variant>.msgpack, the last complete chunk of every variant
