@@ -28,28 +28,30 @@ def read_log(run_dir: str | Path) -> list[dict[str, Any]]:
     return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
 
 
-def select_checkpoint(run_dir: str | Path, level: str, env: str) -> dict[str, Any]:
-    """The log entry of the checkpoint for `level` ("medium" | "expert") in a run's evaluations."""
+def evaluated_checkpoints(run_dir: str | Path) -> list[dict[str, Any]]:
+    """The log entries of a run whose checkpoint file exists."""
     log = [e for e in read_log(run_dir) if (Path(run_dir) / e["checkpoint"]).exists()]
     if not log:
         raise FileNotFoundError(f"no evaluated checkpoints in {run_dir}")
-    if level == "medium":
-        target = MEDIUM_TARGET_SCORE[env]
-        return min(log, key=lambda e: abs(e["normalized_score"] - target))
-    if level == "expert":
-        return max(log, key=lambda e: e["eval_return"])
-    raise ValueError(f"level must be medium or expert, got {level}")
+    return log
+
+
+def select_medium(run_dir: str | Path, env: str) -> dict[str, Any]:
+    """The log entry whose training eval normalised score is closest to D4RL's medium level for `env`."""
+    return min(evaluated_checkpoints(run_dir), key=lambda e: abs(e["normalized_score"] - MEDIUM_TARGET_SCORE[env]))
+
+
+def expert_candidates(run_dir: str | Path, candidates: int = 5) -> list[dict[str, Any]]:
+    """The `candidates` log entries with the best training eval return, best first."""
+    return sorted(evaluated_checkpoints(run_dir), key=lambda e: e["eval_return"], reverse=True)[:candidates]
 
 
 def rank_expert_candidates(run_dir: str | Path, env: str, candidates: int = 5, episodes: int = 20,
                            seed: int = 321) -> list[dict[str, Any]]:
     """The `candidates` log entries with the best training eval return, each with "stochastic_return" (mean of
     `episodes` stochastic episodes) added, best stochastic return first."""
-    log = [e for e in read_log(run_dir) if (Path(run_dir) / e["checkpoint"]).exists()]
-    if not log:
-        raise FileNotFoundError(f"no evaluated checkpoints in {run_dir}")
     ranked = []
-    for e in sorted(log, key=lambda e: e["eval_return"], reverse=True)[:candidates]:
+    for e in expert_candidates(run_dir, candidates):
         params, meta = load_policy(Path(run_dir) / e["checkpoint"])
         sto = evaluate(env, params, episodes, seed=seed, deterministic=False, hidden=tuple(meta["hidden"]),
                        num_envs=10)
@@ -68,7 +70,7 @@ def ship(run_dir: str | Path, level: str, step: int | None = None, episodes: int
         ranked = rank_expert_candidates(run_dir, env, candidates, episodes)
         entry = ranked[0]
     elif step is None:
-        entry = select_checkpoint(run_dir, level, env)
+        entry = select_medium(run_dir, env)
     else:
         entry = next(e for e in read_log(run_dir) if e["step"] == step)
     src = run_dir / entry["checkpoint"]
@@ -125,10 +127,10 @@ def main(argv: list[str] | None = None) -> None:
             print(f"{e['step']:>8d}  eval {e['eval_return']:8.1f}  norm {e['normalized_score']:6.1f}  "
                   f"returns {np.round(e['eval_returns']).astype(int).tolist()}")
         if a.level == "expert":  # the choice needs the stochastic re-evaluation that `ship` runs
-            top = sorted(read_log(a.run), key=lambda e: e["eval_return"], reverse=True)[:a.candidates]
-            print("candidates (ship re-evaluates them stochastically):", [e["step"] for e in top])
+            print("candidates (ship re-evaluates them stochastically):",
+                  [e["step"] for e in expert_candidates(a.run, a.candidates)])
         else:
-            print("choice:", select_checkpoint(a.run, a.level, run["env"])["step"])
+            print("choice:", select_medium(a.run, run["env"])["step"])
         return
     print(json.dumps(ship(a.run, a.level, a.step, a.episodes, note=a.note, candidates=a.candidates), indent=1))
 
