@@ -41,16 +41,10 @@ def build(args):
 
 
 def make_parser():
-    p = parser("experiments.figure2", __doc__, updates=30_000, eval_every=2_500)
+    p = parser("experiments.figure2", __doc__, updates=30_000, eval_every=2_500, edac_pretrain=EDAC_PRETRAIN)
     p.add_argument("--envs", nargs="+", choices=ENVS, default=list(ENVS))
     p.add_argument("--algos", nargs="+", choices=("td3bc", "edac"), default=["td3bc", "edac"])
     p.add_argument("--edac-updates", type=positive_int, default=16_000, help="EDAC's budget (default %(default)s)")
-    for action in p._actions:  # the shared flags' help states mujoco_medium's EDAC defaults; figure2 has its own
-        if action.dest == "pretrain_updates":
-            action.help = f"default: 10k TD3+BC, {EDAC_PRETRAIN['pretrain_updates'] // 1000}k EDAC"
-        elif action.dest == "actor_pretrain_fraction":
-            action.help = ("EDAC: share of --pretrain-updates spent on soft BC, the rest on the critic "
-                           f"(default {EDAC_PRETRAIN['actor_pretrain_fraction']})")
     p.add_argument("--edac-eval-every", type=positive_int, default=1_000, help="EDAC's evaluation interval")
     return p
 

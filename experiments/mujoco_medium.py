@@ -17,6 +17,7 @@ import sys
 
 from experiments.common import OneLineParser, main_guard, positive_int, run_args, study_fields
 from offrl_jax.algos import ALGOS
+from offrl_jax.algos.edac import EDACConfig
 from offrl_jax.runner import Study, Variant
 
 ENVS = ("hopper", "halfcheetah", "walker2d")
@@ -26,8 +27,10 @@ LABELS = {"actor+critic": "pretrained", "none": "scratch", "actor": "actor-only"
 
 
 def parser(prog: str = "experiments.mujoco_medium", doc: str = __doc__, updates: int = 100_000,
-           eval_every: int = 5_000, env: str = "hopper") -> argparse.ArgumentParser:
-    """The flags every MuJoCo study shares; studies pass their own defaults."""
+           eval_every: int = 5_000, env: str = "hopper", edac_pretrain: dict | None = None) -> argparse.ArgumentParser:
+    """The flags every MuJoCo study shares; studies pass their own defaults (`edac_pretrain`: the study's EDAC
+    `pretrain_updates` / `actor_pretrain_fraction`, for the help text; default EDACConfig's)."""
+    edac = {f: getattr(EDACConfig, f) for f in ("pretrain_updates", "actor_pretrain_fraction")} | (edac_pretrain or {})
     p = OneLineParser(prog=prog, description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
     g = p.add_argument_group("what to compare")
     g.add_argument("--env", choices=ENVS, default=env)
@@ -35,7 +38,8 @@ def parser(prog: str = "experiments.mujoco_medium", doc: str = __doc__, updates:
     g.add_argument("--algo", choices=tuple(ALGOS), default="td3bc")
     g.add_argument("--pretrain", nargs="+", choices=PRETRAIN, default=["actor+critic", "none"],
                    help="pre-training modes to compare, one variant each (default: actor+critic none)")
-    g.add_argument("--pretrain-updates", type=positive_int, default=None, help="default: 10k TD3+BC, 20k EDAC")
+    g.add_argument("--pretrain-updates", type=positive_int, default=None,
+                   help=f"default: 10k TD3+BC, {edac['pretrain_updates'] // 1000}k EDAC")
     g.add_argument("--lam", type=float, default=None, help="TD weight in critic pre-training (paper: 0 or 0.1)")
     g.add_argument("--lambda-mode", choices=("loss", "target"), default=None)
     g.add_argument("--actor-ln", action=argparse.BooleanOptionalAction, default=None, help="LayerNorm in the actor")
@@ -48,7 +52,8 @@ def parser(prog: str = "experiments.mujoco_medium", doc: str = __doc__, updates:
     g.add_argument("--eta", type=float, nargs="+", default=None,
                    help="EDAC diversity weight; several values = a sweep, vmapped in one program")
     g.add_argument("--actor-pretrain-fraction", type=float, default=None,
-                   help="EDAC: share of --pretrain-updates spent on soft BC, the rest on the critic (default 0.5)")
+                   help="EDAC: share of --pretrain-updates spent on soft BC, the rest on the critic "
+                   f"(default {edac['actor_pretrain_fraction']})")
     g.add_argument("--hidden", type=positive_int, nargs="+", default=None,
                    help="hidden layer widths (default per algo)")
     g.add_argument("--actor-lr", type=float, default=None)
