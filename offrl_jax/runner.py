@@ -21,7 +21,7 @@ import sys
 import threading
 import time
 import warnings
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
 from pathlib import Path
 from typing import Any
 
@@ -31,7 +31,7 @@ from tqdm.auto import tqdm
 from offrl_jax.algos import ALGOS, make_algorithm, make_config
 from offrl_jax.checkpoint import atomic_write_bytes, atomic_write_text, load_checkpoint, save_checkpoint
 from offrl_jax.data.dataset import Dataset
-from offrl_jax.driver import Driver, device_data
+from offrl_jax.driver import Driver, check_call_grid, device_data
 from offrl_jax.envs import get_env_spec
 from offrl_jax.evaluate import evaluate_normalized, make_policy
 
@@ -64,7 +64,9 @@ class Study:
     batch_size: int = 256
     checkpoint_every: int = 0  # 0 = at every evaluation
     transitions: int | None = None  # cap the dataset size (quick runs, tests)
-    reference: str | None = None  # label of the from-scratch variant whose final score is the asymptote
+    clip_actions: bool = False  # clip out-of-bounds dataset actions (with a warning) instead of refusing the data
+    reference: str | None = None  # label of the from-scratch variant whose final score is the asymptote (None: no
+    # asymptote, and no updates/seconds to 90 %)
     final_window: tuple[int, int] | None = None  # final score = mean of evaluations in [lo, hi] (Adroit protocol)
     vmap_sweeps: bool = True  # variants differing only in one sweepable value (e.g. alpha) share one vmapped program
 
@@ -82,8 +84,10 @@ class Study:
         if self.reference is not None and not any(reference_label(self, label) for label in labels):
             raise ValueError(f"Study.reference = {self.reference!r} is not a variant label ({', '.join(labels)})")
         get_env_spec(self.env)
-        for v in self.variants:  # every variant's hyper-parameters are checked before anything runs or is written
-            make_config(v.algo, self.env, self.dataset, **dict(v.overrides))
+        for v in self.variants:  # every variant's hyper-parameters and budget are checked before anything is written
+            config = make_config(v.algo, self.env, self.dataset, **dict(v.overrides))
+            phases = make_algorithm(config, obs_dim=1, act_dim=1, num_transitions=1).phases(self.updates)
+            check_call_grid(phases, self.eval_every)
 
     def to_json(self) -> str:
         return json.dumps(dataclasses.asdict(self), indent=2)
@@ -91,7 +95,8 @@ class Study:
     @staticmethod
     def from_json(text: str) -> Study:
         raw = json.loads(text)
-        raw["variants"] = tuple(Variant(v["label"], v["algo"], tuple(tuple(o) for o in v["overrides"]))
+        value = lambda x: tuple(x) if isinstance(x, list) else x  # noqa: E731  JSON has lists; configs use tuples
+        raw["variants"] = tuple(Variant(v["label"], v["algo"], tuple((k, value(x)) for k, x in v["overrides"]))
                                 for v in raw["variants"])
         raw["seeds"] = tuple(raw["seeds"])
         raw["final_window"] = tuple(raw["final_window"]) if raw.get("final_window") else None
@@ -109,7 +114,7 @@ def run_study(study: Study, out_dir: Path, dataset: Dataset, resume: bool = Fals
     its own).
     """
     out_dir.mkdir(parents=True, exist_ok=True)
-    if not resume:
+    if not resume or not (out_dir / "config.json").exists():  # a resumed multi-study run may not have begun it
         atomic_write_text(out_dir / "config.json", study.to_json())
     bar = tqdm(total=len(study.variants) * study.updates, disable=not progress, unit="upd", dynamic_ncols=True,
                file=sys.stderr)
@@ -129,6 +134,7 @@ def run_study(study: Study, out_dir: Path, dataset: Dataset, resume: bool = Fals
             with ThreadPoolExecutor(max_workers=parallel) as pool:
                 futures = [pool.submit(run, g) for g in groups]
                 try:
+                    wait(futures, return_when=FIRST_EXCEPTION)  # a failure in any group is seen at once
                     for future in futures:
                         future.result()
                 except BaseException:
@@ -138,7 +144,7 @@ def run_study(study: Study, out_dir: Path, dataset: Dataset, resume: bool = Fals
         bar.close()
     history = recorder.all_rows()
     summary = summarize(study, history, pretrain_ends)
-    atomic_write_text(out_dir / "summary.json", json.dumps(summary, indent=2))
+    atomic_write_text(out_dir / "summary.json", summary_json(summary))
     plot_curves(out_dir / "curves.png", study, history, pretrain_ends)
     return summary
 
@@ -203,6 +209,7 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
     policy = make_policy(algo.act, obs_mean, obs_std)
     phases = algo.phases(study.updates)
     pretrain_end = sum(p.steps for p in phases if p.name != "offline_rl")
+    last_update = sum(p.steps for p in phases)  # TD3 trims an odd budget to its 2-update call grid
     name = " + ".join(labels)
     ckpt_path = out_dir / "checkpoints" / f"{'+'.join(labels)}.msgpack"
     states, start, seconds, rows = None, 0, 0.0, []
@@ -214,7 +221,7 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
         states, start, seconds, rows = load_checkpoint(ckpt_path, driver.init())
         record()
     bar.update(start * len(group))
-    if start >= study.updates:
+    if start >= last_update:
         return pretrain_end
     every = study.checkpoint_every or study.eval_every
     last_saved = start
@@ -244,7 +251,8 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
         mean_score = float(np.nanmean(scores)) if alive.any() else float("nan")
         bar.set_postfix_str(f"{name} | {chunk.phase} | {chunk.updates_per_s:.0f} upd/s | score "
                             f"{mean_score:.1f} | eval {time.perf_counter() - tic:.1f}s")
-        if alive.all() and (chunk.update - last_saved >= every or chunk.update == study.updates):
+        # a diverged seed's NaN state is saved too: on resume it is found non-finite again and stays out
+        if chunk.update - last_saved >= every or chunk.update == last_update:
             save_checkpoint(ckpt_path, chunk.states, chunk.update, chunk.seconds, rows)
             last_saved = chunk.update
         record()
@@ -303,9 +311,11 @@ def score_matrix(rows: list[dict], label: str) -> tuple[np.ndarray, np.ndarray, 
 
 
 def reference_label(study: Study, label: str) -> str | None:
-    """The from-scratch variant `label` is measured against: `study.reference` (default: the last variant), or in a
-    sweep, where labels end in " alpha=2.5" etc., the reference with the same value ("scratch alpha=2.5")."""
-    reference = study.reference or study.variants[-1].label
+    """The from-scratch variant `label` is measured against: `study.reference` (None: none), or in a sweep, where
+    labels end in " alpha=2.5" etc., the reference with the same value ("scratch alpha=2.5")."""
+    reference = study.reference
+    if reference is None:
+        return None
     labels = {v.label for v in study.variants}
     if reference in labels:
         return reference
@@ -318,6 +328,12 @@ def summarize(study: Study, rows: list[dict], pretrain_ends: dict[str, int]) -> 
     """Per variant: final score (per seed, the mean of the last 10 % of evaluations, or of those inside
     `final_window`; then mean and 95 % CI over seeds), the from-scratch asymptote, and the first evaluation at which
     the seed-mean reaches 90 % of it (in a sweep: of the reference with the same swept value)."""
+    with warnings.catch_warnings():  # NaN means of all-NaN data (no reference, every seed diverged) are expected
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return _summarize(study, rows, pretrain_ends)
+
+
+def _summarize(study: Study, rows: list[dict], pretrain_ends: dict[str, int]) -> list[dict]:
     finals = {}
     for v in study.variants:
         updates, _, scores = score_matrix(rows, v.label)
@@ -325,9 +341,9 @@ def summarize(study: Study, rows: list[dict], pretrain_ends: dict[str, int]) -> 
             keep = (updates >= study.final_window[0]) & (updates <= study.final_window[1])
         else:
             keep = np.arange(len(updates)) >= len(updates) - max(1, int(round(0.1 * len(updates))))
-        with warnings.catch_warnings():  # a diverged seed's window is all NaN: its final is NaN, no warning
-            warnings.simplefilter("ignore", RuntimeWarning)
-            finals[v.label] = np.nanmean(scores[:, keep], axis=1) if keep.any() else np.full(len(study.seeds), np.nan)
+        # a seed that diverged before or inside the window has NaN there, so its final is NaN (not the mean of
+        # its evaluations before it diverged): it is left out of the mean and listed in seeds_diverged
+        finals[v.label] = scores[:, keep].mean(axis=1) if keep.any() else np.full(len(study.seeds), np.nan)
     summary = []
     for v in study.variants:
         reference = reference_label(study, v.label)
@@ -354,6 +370,17 @@ def summarize(study: Study, rows: list[dict], pretrain_ends: dict[str, int]) -> 
             "overrides": dict(v.overrides),
         })
     return summary
+
+
+def summary_json(summary: list[dict]) -> str:
+    """summary.json text: NaN (no asymptote, every seed diverged) becomes null, which JSON has and NaN is not."""
+    def clean(x):
+        if isinstance(x, float) and not math.isfinite(x):
+            return None
+        if isinstance(x, dict):
+            return {k: clean(v) for k, v in x.items()}
+        return [clean(v) for v in x] if isinstance(x, list) else x
+    return json.dumps(clean(summary), indent=2)
 
 
 def _trend(curve: np.ndarray) -> float | None:

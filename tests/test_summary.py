@@ -86,7 +86,8 @@ def test_sweep_variants_are_measured_against_the_scratch_run_with_the_same_value
     labels = ["pretrained alpha=1", "pretrained alpha=2", "scratch alpha=1", "scratch alpha=2"]
     study = Study(name="t", dataset="hopper-medium", env="hopper", seeds=(0,), updates=2000, eval_every=1000,
                   variants=tuple(Variant.of(label, "td3bc", alpha=float(label[-1]),
-                                            pretrain="none" if label.startswith("scratch") else "actor+critic")
+                                            pretrain="none" if label.startswith("scratch") else "actor+critic",
+                                            pretrain_updates=1000)
                                  for label in labels), reference="scratch")
     finals = {"pretrained alpha=1": 50, "pretrained alpha=2": 60, "scratch alpha=1": 40, "scratch alpha=2": 80}
     rows = [r for label, final in finals.items() for r in rows_of(label, [[final / 2, final]])]
@@ -100,7 +101,8 @@ def test_sweep_variants_are_measured_against_the_scratch_run_with_the_same_value
 def test_ninety_percent_of_a_negative_asymptote_lies_below_it():
     """Adroit scores can be negative: 90 % of -10 must be reached at -11, not demanded at -9 (above the asymptote)."""
     study = Study(name="t", dataset="door-human", env="door", seeds=(0,), updates=2000, eval_every=1000,
-                  variants=(Variant.of("pre", "td3bc"), Variant.of("scratch", "td3bc", pretrain="none")),
+                  variants=(Variant.of("pre", "td3bc", pretrain_updates=1000),
+                            Variant.of("scratch", "td3bc", pretrain="none")),
                   reference="scratch")
     rows = rows_of("pre", [[-11.0, -10.5]]) + rows_of("scratch", [[-20.0, -10.0]])
     summary = {s["variant"]: s for s in summarize(study, rows, {})}
@@ -120,3 +122,25 @@ def test_report_gives_each_swept_variant_its_own_asymptote():
     assert lines[-1] == "| scratch alpha=5 | 20.0 ± 0.0 | never | never | 0 | 20.0 |"
     # one shared asymptote stays in the header, with no extra column
     assert "asymptote (from-scratch final) 40.0" in table(summary[:2]).splitlines()[0]
+
+
+def test_a_seed_that_diverges_inside_the_final_window_has_no_final_score():
+    import math
+
+    study = Study(name="t", dataset="door-human", env="door", seeds=(0, 1), updates=4000, eval_every=1000,
+                  variants=(Variant.of("bc", "bc"),), final_window=(2000, 4000))
+    nan = float("nan")
+    rows = rows_of("bc", [[1.0, 2.0, 3.0, 4.0], [1.0, 50.0, 60.0, nan]])  # seed 1 diverged after 3000 updates
+    (s,) = summarize(study, rows, {})
+    assert s["final_score_mean"] == 3.0 and s["seeds_diverged"] == [1]  # not (3 + 55) / 2
+    assert math.isnan(s["asymptote"]) and s["updates_to_90pct"] is None  # no reference given: no asymptote
+
+
+def test_summary_json_writes_null_for_nan():
+    import json
+
+    from offrl_jax.runner import summary_json
+
+    text = summary_json([{"asymptote": float("nan"), "final_score_mean": 3.0, "overrides": {"x": float("inf")}}])
+    assert json.loads(text) == [{"asymptote": None, "final_score_mean": 3.0, "overrides": {"x": None}}]
+    assert "NaN" not in text and "Infinity" not in text
