@@ -17,7 +17,7 @@ def build(args):
 
 
 def make_parser():
-    return parser("experiments.ablation", __doc__, updates=30_000, eval_every=2_500)
+    return parser("experiments.ablation", __doc__, updates=30_000, eval_every=2_500, omit=("pretrain",))
 
 
 def main(argv=None) -> int:

@@ -3,16 +3,18 @@ TD3+BC+CQL and EDAC+BC, the hybrids with and without pre-training.
 
 The paper's protocol: 300k updates (200k of pre-training for the pre-trained hybrids), evaluation every 10k updates,
 10 episodes each, with the 300-step time limit and the re-computed random score (-84.52); the reported score is the
-mean of the evaluations between 200k and 300k updates, over 4 seeds (mean +- std).  `--scale` shrinks every update
-count by the same factor for a CPU (default 0.1: 30k updates, 20k pre-training, window 20k-30k, evaluation every
-1k); `--scale 1` is the paper's protocol.  EDAC(+BC) uses the paper's 50 critics and eta 200 unless told otherwise.
+mean of the evaluations between 200k and 300k updates (both ends included: 11 evaluations, the first at the end
+of pre-training), over 4 seeds (mean +- std).  `--scale` shrinks every update count by the same factor for a CPU
+(default 0.1: 30k updates, 20k pre-training, window 20k-30k, evaluation every 1k); `--scale 1` is the paper's
+protocol.  EDAC(+BC) uses the paper's 50 critics and eta 200 unless told otherwise.
 
     python -m experiments.adroit_door [--dataset door-human] [--variants BC "pre-trained TD3+BC+CQL"] [--scale 1]
         [--seeds 4]
 """
+import argparse
 import sys
 
-from experiments.common import OneLineParser, main_guard, run_args, study_fields
+from experiments.common import OneLineParser, main_guard, positive_int, run_args, study_fields
 from offrl_jax.runner import Study, Variant
 
 # label -> (algorithm, pre-training)
@@ -34,7 +36,7 @@ def build(args) -> Study:
     variants = []
     for label in args.variants:
         algo, mode = VARIANTS[label]
-        kw = {} if mode is None else {"pretrain": mode, "pretrain_updates": pretrain}
+        kw = {} if mode is None else {"pretrain": mode} | ({"pretrain_updates": pretrain} if mode != "none" else {})
         if algo.startswith("edac") and args.num_critics:
             kw["num_critics"] = args.num_critics
         variants.append(Variant.of(label, algo, **kw))
@@ -44,12 +46,13 @@ def build(args) -> Study:
 
 
 def main(argv=None) -> int:
-    p = OneLineParser(prog="experiments.adroit_door", description=__doc__)
+    p = OneLineParser(prog="experiments.adroit_door", description=__doc__,
+                      formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--dataset", choices=("door-human", "door-cloned"), default="door-human")
     p.add_argument("--variants", nargs="+", choices=tuple(VARIANTS), default=list(VARIANTS))
     p.add_argument("--scale", type=float, default=0.1, help="fraction of the paper's update counts (default 0.1)")
-    p.add_argument("--num-critics", type=int, default=None, help="EDAC(+BC) ensemble size (paper: 50)")
-    run_args(p, updates=300_000, eval_every=10_000, seeds=4)
+    p.add_argument("--num-critics", type=positive_int, default=None, help="EDAC(+BC) ensemble size (paper: 50)")
+    run_args(p, updates=None, eval_every=None, seeds=4)  # --scale sets both
     return main_guard(build, p, argv)
 
 

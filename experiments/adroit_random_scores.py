@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 from tqdm.auto import tqdm
 
-from experiments.common import OneLineParser
+from experiments.common import OneLineParser, UsageError, refuse_existing
 from offrl_jax.checkpoint import atomic_write_text
 from offrl_jax.envs import ENVS, make_env
 
@@ -40,14 +40,20 @@ def random_returns(env_name: str, episodes: int, seed: int) -> np.ndarray:
 
 def main(argv=None) -> int:
     ap = OneLineParser(prog="experiments.adroit_random_scores", description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--episodes", type=int, default=100)
     ap.add_argument("--envs", nargs="+", choices=tuple(PAPER_TABLE4), default=list(PAPER_TABLE4))
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, default=None)
+    ap.add_argument("--overwrite", action="store_true", help="replace the files of an earlier run in --out")
     args = ap.parse_args(argv)
     if args.episodes < 2:
         print("error: --episodes must be >= 2 (for a standard error)", file=sys.stderr)
+        return 2
+    try:
+        refuse_existing(args.out, args.overwrite)
+    except UsageError as e:
+        print(f"error: {e}", file=sys.stderr)
         return 2
     rows = []
     print(f"{'env':<9} {'limit':>5} {'episodes':>8} {'mean':>10} {'s.e.':>7} {'paper':>9} {'diff/s.e.':>9}")

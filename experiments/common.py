@@ -1,8 +1,9 @@
 """What every experiment CLI shares: the run flags, the output-directory rules, one-line errors.
 
 Rules: a new run writes to a new timestamped directory under runs/<study>/ unless --out is given; an existing,
-non-empty --out is refused unless --overwrite; --resume DIR continues the study saved in DIR from its last complete
-checkpoint.  Bad input -> `error: ...` on stderr, exit 2, no traceback.
+non-empty --out is refused unless --overwrite, and --overwrite replaces only a directory that holds an earlier run
+(its config.json), after the new run's data has loaded; --resume DIR continues the study (or studies) saved in DIR
+from the last complete checkpoints.  Bad input -> `error: ...` on stderr, exit 2, no traceback.
 """
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from offrl_jax import datasets
+from offrl_jax.checkpoint import atomic_write_text
 from offrl_jax.data.dataset import DatasetError
 from offrl_jax.runner import Diverged, Study, print_table, run_study
 
@@ -24,9 +26,12 @@ class UsageError(ValueError):
 
 
 def positive_int(text: str) -> int:
-    try:
-        value = int(float(text)) if "e" in text.lower() else int(text)
-    except ValueError:
+    try:  # "1e6" is accepted, "2.5e0" and "1e400" are not
+        number = float(text) if "e" in text.lower() else int(text)
+        value = int(number)
+        if value != number:
+            raise ValueError
+    except (ValueError, OverflowError):
         raise argparse.ArgumentTypeError(f"expected a positive integer, got '{text}'") from None
     if value <= 0:
         raise argparse.ArgumentTypeError(f"expected a positive integer, got '{text}'")
@@ -34,56 +39,106 @@ def positive_int(text: str) -> int:
 
 
 class OneLineParser(argparse.ArgumentParser):
+    def __init__(self, *args, **kwargs):  # no prefix matching: "--pretrain" must not silently mean "--pretrain-updates"
+        super().__init__(*args, **{"allow_abbrev": False} | kwargs)
+
     def error(self, message: str):  # argparse prints usage + error; we print one line
         print(f"error: {message}", file=sys.stderr)
         sys.exit(2)
 
 
-def run_args(parser: argparse.ArgumentParser, updates: int, eval_every: int, seeds: int = 3) -> None:
+def run_args(parser: argparse.ArgumentParser, updates: int | None, eval_every: int | None, seeds: int = 3) -> None:
+    """The run flags; `updates`/`eval_every` None leaves that flag out (a study that sets it itself)."""
     g = parser.add_argument_group("run")
     g.add_argument("--seeds", type=positive_int, default=seeds, help="number of seeds, vmapped (default %(default)s)")
     g.add_argument("--seed-offset", type=int, default=0, help="first seed (seeds are offset..offset+N-1)")
-    g.add_argument("--updates", type=positive_int, default=updates,
-                   help="total gradient updates per variant, pre-training included (default %(default)s)")
-    g.add_argument("--eval-every", type=positive_int, default=eval_every, help="updates between evaluations")
-    g.add_argument("--eval-episodes", type=positive_int, default=10, help="episodes per evaluation per seed")
+    if updates is not None:
+        g.add_argument("--updates", type=positive_int, default=updates,
+                       help="total gradient updates per variant, pre-training included (default %(default)s)")
+    if eval_every is not None:
+        g.add_argument("--eval-every", type=positive_int, default=eval_every,
+                       help="updates between evaluations (default %(default)s)")
+    g.add_argument("--eval-episodes", type=positive_int, default=10,
+                   help="episodes per evaluation per seed (default %(default)s)")
     g.add_argument("--batch-size", type=positive_int, default=256)
     g.add_argument("--checkpoint-every", type=int, default=0, help="updates between checkpoints (0: every evaluation)")
     g.add_argument("--dataset-path", default=None, help="a D4RL .hdf5, Minari directory or id, or .npz to use instead")
     g.add_argument("--transitions", type=positive_int, default=None, help="cap the dataset at N transitions")
     g.add_argument("--clip-actions", action="store_true", help="clip out-of-bounds dataset actions (with a warning)")
     g.add_argument("--out", type=Path, default=None, help="output directory (default: runs/<study>/<timestamp>)")
-    g.add_argument("--overwrite", action="store_true", help="allow writing into an existing non-empty --out")
-    g.add_argument("--resume", type=Path, default=None, help="continue the run saved in this directory")
+    g.add_argument("--overwrite", action="store_true",
+                   help="replace the earlier run in --out (only a directory holding a run's config.json)")
+    g.add_argument("--resume", type=Path, default=None,
+                   help="continue the run saved in this directory, with its saved settings (the flags that choose "
+                        "the study, its variants and its budget are not read)")
     g.add_argument("--parallel", type=positive_int, default=2,
                    help="variants trained at once, in threads (default %(default)s: one XLA program at these sizes "
                         "keeps about one CPU core busy); 1 = one after another")
     g.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
-def output_dir(args, study_name: str) -> Path:
+def output_dir(args, study_name: str) -> tuple[Path, bool]:
+    """(directory, whether an earlier run in it is to be replaced); nothing is deleted or created here."""
     if args.resume is not None:
-        if not (args.resume / "config.json").exists():
+        if not (args.resume / "config.json").is_file():
             raise UsageError(f"{args.resume}: nothing to resume (no config.json)")
-        return args.resume
+        return args.resume, False
     if args.out is None:
-        return Path("runs") / study_name / time.strftime("%Y%m%d-%H%M%S")
+        stamp = Path("runs") / study_name / time.strftime("%Y%m%d-%H%M%S")
+        out, n = stamp, 1
+        while out.exists():  # two runs started in the same second
+            n += 1
+            out = stamp.with_name(f"{stamp.name}-{n}")
+        return out, False
+    if args.out.exists() and not args.out.is_dir():
+        raise UsageError(f"{args.out} is a file, not a directory")
     if args.out.exists() and any(args.out.iterdir()):
         if not args.overwrite:
             raise UsageError(f"{args.out} exists and is not empty; pass --overwrite or choose another --out")
-        shutil.rmtree(args.out)
-    return args.out
+        if not (args.out / "config.json").is_file():
+            raise UsageError(f"{args.out} holds no earlier run (no config.json); --overwrite will not delete it")
+        return args.out, True
+    return args.out, False
+
+
+def refuse_existing(out: Path | None, overwrite: bool) -> None:
+    """For commands that write a few named files into --out: refuse a non-empty --out unless --overwrite."""
+    if out is not None and out.exists() and (not out.is_dir() or any(out.iterdir())) and not overwrite:
+        raise UsageError(f"{out} exists and is not empty; pass --overwrite or choose another --out")
 
 
 def study_fields(args) -> dict:
-    return dict(seeds=tuple(range(args.seed_offset, args.seed_offset + args.seeds)), updates=args.updates,
-                eval_every=args.eval_every, eval_episodes=args.eval_episodes, batch_size=args.batch_size,
-                checkpoint_every=args.checkpoint_every, transitions=args.transitions)
+    """Study fields from the run flags (a study without --updates / --eval-every sets those itself)."""
+    fields = dict(seeds=tuple(range(args.seed_offset, args.seed_offset + args.seeds)),
+                  eval_episodes=args.eval_episodes, batch_size=args.batch_size,
+                  checkpoint_every=args.checkpoint_every, transitions=args.transitions, clip_actions=args.clip_actions)
+    return fields | {k: getattr(args, k) for k in ("updates", "eval_every") if hasattr(args, k)}
 
 
-def load_data(study: Study, args):
+def studies_json(studies: list[Study]) -> str:
+    """The top-level config.json of a multi-study run: every study whole, so --resume can start those not begun."""
+    return json.dumps({"studies": [json.loads(s.to_json()) for s in studies]}, indent=2) + "\n"
+
+
+def saved_studies(out: Path) -> Study | list[Study]:
+    """The study (or studies) a run directory was started with, from its config.json."""
+    path = out / "config.json"
+    try:
+        raw = json.loads(path.read_text())
+        if "studies" not in raw:
+            return Study.from_json(path.read_text())
+        if all(isinstance(s, dict) for s in raw["studies"]):
+            return [Study.from_json(json.dumps(s)) for s in raw["studies"]]
+        # runs started before the top-level file held whole studies: each started study's own config.json
+        return [Study.from_json((out / name / "config.json").read_text()) for name in raw["studies"]
+                if (out / name / "config.json").is_file()]
+    except (KeyError, TypeError, json.JSONDecodeError) as e:
+        raise UsageError(f"{path}: not a saved study ({type(e).__name__}: {e})") from None
+
+
+def load_data(study: Study):
     source = study.dataset
-    ds = datasets.load(source, transitions=study.transitions, clip_actions=args.clip_actions or None, env=study.env)
+    ds = datasets.load(source, transitions=study.transitions, clip_actions=study.clip_actions or None, env=study.env)
     if study.transitions and len(ds) > study.transitions:
         ds = ds.select(slice(0, study.transitions))
     if ds.env is not None and ds.env != study.env:
@@ -97,31 +152,32 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
     args = parser.parse_args(argv)
     out = None
     try:
-        built = None if args.resume is not None else build(args)  # validates every hyper-parameter first
-        out = output_dir(args, parser.prog.split(".")[-1])
+        built = None if args.resume is not None else build(args)  # validates every hyper-parameter and budget
+        out, replace = output_dir(args, parser.prog.split(".")[-1])
         if args.resume is not None:
-            subs = sorted(out.glob("*/config.json"))
-            built = [Study.from_json(p.read_text()) for p in subs] if subs else Study.from_json(
-                (out / "config.json").read_text())
+            built = saved_studies(out)
         studies = built if isinstance(built, list) else [built]
+        data = [load_data(study) for study in studies]  # bad data fails here, before anything is written
+        if replace:
+            shutil.rmtree(out)
         if isinstance(built, list) and args.resume is None:
-            out.mkdir(parents=True, exist_ok=True)
-            (out / "config.json").write_text(json.dumps({"studies": [s.name for s in built]}) + "\n")
-        for study in studies:
+            out.mkdir(parents=True, exist_ok=True)  # the whole studies, so --resume can start those not begun yet
+            atomic_write_text(out / "config.json", studies_json(built))
+        for study, ds in zip(studies, data):
             study_out = out / study.name if isinstance(built, list) else out
-            ds = load_data(study, args)
             print(f"{study.name}: {len(ds):,} transitions of {study.dataset}; writing to {study_out}", file=sys.stderr)
             summary = run_study(study, study_out, ds, resume=args.resume is not None, progress=not args.no_progress,
                                 parallel=args.parallel)
             print_table(summary)
             print(f"results: {study_out}/summary.json, curves.csv, curves.png", file=sys.stderr)
-    except (UsageError, DatasetError, ValueError, FileNotFoundError) as e:
+    except (UsageError, DatasetError, ValueError, OSError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
     except Diverged as e:
         print(f"error: {e}", file=sys.stderr)
         return 3
     except KeyboardInterrupt:
-        print(f"interrupted; resume with --resume {out}", file=sys.stderr)
+        where = f"; resume with --resume {out}" if out is not None and (out / "config.json").is_file() else ""
+        print(f"interrupted{where}", file=sys.stderr)
         return 130
     return 0

@@ -30,6 +30,9 @@ def build(args):
     for env in args.envs:
         for algo in args.algos:
             variants, extra = pretrain_variants(algo, args.pretrain, args), {}
+            if algo == "td3bc":  # --num-critics is EDAC's ensemble; TD3+BC keeps its two critics
+                variants = tuple(Variant.of(v.label, v.algo, **{k: x for k, x in v.overrides if k != "num_critics"})
+                                 for v in variants)
             if algo == "edac":  # 10 critics on a CPU unless --num-critics says otherwise
                 n = args.num_critics or 10
                 variants = tuple(Variant.of(v.label, v.algo, **edac_overrides(dict(v.overrides), n)) for v in variants)
@@ -41,11 +44,13 @@ def build(args):
 
 
 def make_parser():
-    p = parser("experiments.figure2", __doc__, updates=30_000, eval_every=2_500, edac_pretrain=EDAC_PRETRAIN)
+    p = parser("experiments.figure2", __doc__, updates=30_000, eval_every=2_500, edac_pretrain=EDAC_PRETRAIN,
+               omit=("env", "algo"))
     p.add_argument("--envs", nargs="+", choices=ENVS, default=list(ENVS))
     p.add_argument("--algos", nargs="+", choices=("td3bc", "edac"), default=["td3bc", "edac"])
     p.add_argument("--edac-updates", type=positive_int, default=16_000, help="EDAC's budget (default %(default)s)")
-    p.add_argument("--edac-eval-every", type=positive_int, default=1_000, help="EDAC's evaluation interval")
+    p.add_argument("--edac-eval-every", type=positive_int, default=1_000,
+                   help="EDAC's evaluation interval (default %(default)s); --updates and --eval-every are TD3+BC's")
     return p
 
 

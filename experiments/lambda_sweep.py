@@ -14,7 +14,7 @@ from experiments.mujoco_medium import given, make_study, parser, sweep_variants
 
 
 def build(args):
-    extra = {k: v for k, v in given(args).items() if k != "lam"}
+    extra = given(args)
     variants = tuple(v for lam in args.lambdas
                      for v in sweep_variants(f"lambda={lam:g}", args.algo,
                                              {"pretrain": "actor+critic", "lam": lam} | extra))
@@ -24,7 +24,8 @@ def build(args):
 
 
 def make_parser():
-    p = parser("experiments.lambda_sweep", __doc__, updates=20_000, eval_every=2_000, env="halfcheetah")
+    p = parser("experiments.lambda_sweep", __doc__, updates=20_000, eval_every=2_000, env="halfcheetah",
+               omit=("pretrain", "lam"))
     p.add_argument("--lambdas", type=float, nargs="+", default=[0.0, 0.1, 0.5, 1.0])
     return p
 

@@ -16,7 +16,7 @@ COMBOS = {"LN actor+critic": (True, True), "LN actor only": (True, False), "LN c
 
 def build(args):
     envs = [args.env] if args.env else ["hopper", "halfcheetah"]
-    extra = {k: v for k, v in given(args).items() if k not in ("actor_layer_norm", "critic_layer_norm")}
+    extra = given(args)
     studies = []
     for env in envs:
         variants = tuple(v for label, (a, c) in COMBOS.items()
@@ -28,7 +28,8 @@ def build(args):
 
 
 def make_parser():
-    return parser("experiments.layernorm", __doc__, updates=20_000, eval_every=2_000, env=None)
+    return parser("experiments.layernorm", __doc__, updates=20_000, eval_every=2_000, env=None,
+                  omit=("pretrain", "actor_ln", "critic_ln"))
 
 
 def main(argv=None) -> int:

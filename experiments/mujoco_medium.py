@@ -15,7 +15,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from experiments.common import OneLineParser, main_guard, positive_int, run_args, study_fields
+from experiments.common import OneLineParser, UsageError, main_guard, positive_int, run_args, study_fields
 from offrl_jax.algos import ALGOS
 from offrl_jax.algos.edac import EDACConfig
 from offrl_jax.runner import Study, Variant
@@ -27,53 +27,74 @@ LABELS = {"actor+critic": "pretrained", "none": "scratch", "actor": "actor-only"
 
 
 def parser(prog: str = "experiments.mujoco_medium", doc: str = __doc__, updates: int = 100_000,
-           eval_every: int = 5_000, env: str = "hopper", edac_pretrain: dict | None = None) -> argparse.ArgumentParser:
+           eval_every: int = 5_000, env: str = "hopper", edac_pretrain: dict | None = None, omit: tuple[str, ...] = (),
+           preset: bool = False) -> argparse.ArgumentParser:
     """The flags every MuJoCo study shares; studies pass their own defaults (`edac_pretrain`: the study's EDAC
-    `pretrain_updates` / `actor_pretrain_fraction`, for the help text; default EDACConfig's)."""
+    `pretrain_updates` / `actor_pretrain_fraction`, for the help text; default EDACConfig's), leave out the flags
+    they set themselves (`omit`: destinations, e.g. ("pretrain", "lam")), and only the main job has `--preset`."""
     edac = {f: getattr(EDACConfig, f) for f in ("pretrain_updates", "actor_pretrain_fraction")} | (edac_pretrain or {})
     p = OneLineParser(prog=prog, description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
-    g = p.add_argument_group("what to compare")
-    g.add_argument("--env", choices=ENVS, default=env)
-    g.add_argument("--level", choices=LEVELS, default="medium", help="dataset level (default %(default)s)")
-    g.add_argument("--algo", choices=tuple(ALGOS), default="td3bc")
-    g.add_argument("--pretrain", nargs="+", choices=PRETRAIN, default=["actor+critic", "none"],
-                   help="pre-training modes to compare, one variant each (default: actor+critic none)")
-    g.add_argument("--pretrain-updates", type=positive_int, default=None,
-                   help=f"default: 10k TD3+BC, {edac['pretrain_updates'] // 1000}k EDAC")
-    g.add_argument("--lam", type=float, default=None, help="TD weight in critic pre-training (paper: 0 or 0.1)")
-    g.add_argument("--lambda-mode", choices=("loss", "target"), default=None)
-    g.add_argument("--actor-ln", action=argparse.BooleanOptionalAction, default=None, help="LayerNorm in the actor")
-    g.add_argument("--critic-ln", action=argparse.BooleanOptionalAction, default=None, help="LayerNorm in the critic")
-    g.add_argument("--ln-affine", action=argparse.BooleanOptionalAction, default=None,
-                   help="learned LayerNorm scale/bias (default on; --no-ln-affine = the authors' code, faster)")
-    g.add_argument("--alpha", type=float, nargs="+", default=None,
-                   help="TD3+BC alpha (default: per env); several values = a sweep, vmapped in one program")
-    g.add_argument("--num-critics", type=int, default=None, help="EDAC/SAC-N ensemble size (default: per env)")
-    g.add_argument("--eta", type=float, nargs="+", default=None,
-                   help="EDAC diversity weight; several values = a sweep, vmapped in one program")
-    g.add_argument("--actor-pretrain-fraction", type=float, default=None,
-                   help="EDAC: share of --pretrain-updates spent on soft BC, the rest on the critic "
-                   f"(default {edac['actor_pretrain_fraction']})")
-    g.add_argument("--hidden", type=positive_int, nargs="+", default=None,
-                   help="hidden layer widths (default per algo)")
-    g.add_argument("--actor-lr", type=float, default=None)
-    g.add_argument("--critic-lr", type=float, default=None)
-    g.add_argument("--preset", choices=("paper",), default=None,
-                   help="paper: 3 envs x {td3bc, edac} x 3 seeds x 1M updates, each in its own sub-directory")
+    group = p.add_argument_group("what to compare")
+
+    def add(flag: str, **kw) -> None:  # omitted flags are not offered: a study never accepts a flag it would ignore
+        if flag[2:].replace("-", "_") not in omit:
+            group.add_argument(flag, **kw)
+
+    add("--env", choices=ENVS, default=env)
+    add("--level", choices=LEVELS, default="medium", help="dataset level (default %(default)s)")
+    add("--algo", choices=tuple(ALGOS), default="td3bc", help="(default %(default)s)")
+    add("--pretrain", nargs="+", choices=PRETRAIN, default=["actor+critic", "none"],
+        help="pre-training modes to compare, one variant each (default: actor+critic none)")
+    add("--pretrain-updates", type=positive_int, default=None,
+        help=f"default: 10k TD3+BC, {edac['pretrain_updates'] // 1000}k EDAC")
+    add("--lam", type=float, default=None, help="TD weight in critic pre-training (paper: 0 or 0.1)")
+    add("--lambda-mode", choices=("loss", "target"), default=None)
+    add("--actor-ln", action=argparse.BooleanOptionalAction, default=None, help="LayerNorm in the actor")
+    add("--critic-ln", action=argparse.BooleanOptionalAction, default=None, help="LayerNorm in the critic")
+    add("--ln-affine", action=argparse.BooleanOptionalAction, default=None,
+        help="learned LayerNorm scale/bias (default on; --no-ln-affine = the authors' code, faster)")
+    add("--alpha", type=float, nargs="+", default=None,
+        help="TD3+BC alpha (default: per env); several values = a sweep, vmapped in one program")
+    add("--num-critics", type=int, default=None, help="EDAC/SAC-N ensemble size (default: per env)")
+    add("--eta", type=float, nargs="+", default=None,
+        help="EDAC diversity weight; several values = a sweep, vmapped in one program")
+    add("--actor-pretrain-fraction", type=float, default=None,
+        help="EDAC: share of --pretrain-updates spent on soft BC, the rest on the critic "
+             f"(default {edac['actor_pretrain_fraction']})")
+    add("--hidden", type=positive_int, nargs="+", default=None,
+        help="hidden layer widths (default per algo)")
+    add("--actor-lr", type=float, default=None)
+    add("--critic-lr", type=float, default=None)
+    if preset:
+        add("--preset", choices=("paper",), default=None,
+            help="paper: 3 envs x {td3bc, edac} medium x 3 seeds x 1M updates (evaluation every 10k), "
+                 "each in its own sub-directory; not with --env/--algo/--level/--updates/--eval-every")
     run_args(p, updates=updates, eval_every=eval_every)
     return p
 
 
+# flag destination -> config field
+OVERRIDES = {"lam": "lam", "lambda_mode": "lambda_mode", "actor_ln": "actor_layer_norm",
+             "critic_ln": "critic_layer_norm", "alpha": "alpha", "num_critics": "num_critics", "eta": "eta",
+             "pretrain_updates": "pretrain_updates", "actor_lr": "actor_lr", "critic_lr": "critic_lr",
+             "hidden": "hidden", "actor_pretrain_fraction": "actor_pretrain_fraction", "ln_affine": "layer_norm_affine"}
+
+
 def overrides(args) -> dict:
-    return {"lam": args.lam, "lambda_mode": args.lambda_mode, "actor_layer_norm": args.actor_ln,
-            "critic_layer_norm": args.critic_ln, "alpha": args.alpha, "num_critics": args.num_critics,
-            "eta": args.eta, "pretrain_updates": args.pretrain_updates, "actor_lr": args.actor_lr,
-            "critic_lr": args.critic_lr, "hidden": tuple(args.hidden) if args.hidden else None,
-            "actor_pretrain_fraction": args.actor_pretrain_fraction, "layer_norm_affine": args.ln_affine}
+    """Config overrides from the flags (None: not given; a study's omitted flags are None)."""
+    values = {field: getattr(args, dest, None) for dest, field in OVERRIDES.items()}
+    return values | {"hidden": tuple(values["hidden"]) if values["hidden"] else None}
+
+
+PRESET_FIXED = ("env", "algo", "level", "updates", "eval_every")  # what --preset paper sets itself
 
 
 def build(args) -> Study | list[Study]:
     if args.preset == "paper":
+        defaults = make_parser()
+        changed = [f"--{d.replace('_', '-')}" for d in PRESET_FIXED if getattr(args, d) != defaults.get_default(d)]
+        if changed:
+            raise UsageError(f"--preset paper sets {', '.join(changed)} itself; leave them out")
         return [make_study(env, algo, "medium", args, dict(updates=1_000_000, eval_every=10_000))
                 for env in ENVS for algo in ("td3bc", "edac")]
     return make_study(args.env, args.algo, args.level, args)
@@ -117,7 +138,7 @@ def make_study(env: str, algo: str, level: str, args, extra: dict | None = None,
 
 
 def make_parser():
-    return parser(updates=60_000)
+    return parser(updates=60_000, preset=True)
 
 
 def main(argv=None) -> int:

@@ -13,18 +13,16 @@ from experiments.mujoco_medium import given, make_study, parser, sweep_variants
 
 
 def build(args):
-    extra = given(args)
-    variants = (sweep_variants("pretrained", args.algo, {"pretrain": "actor+critic"} | extra)
-                + sweep_variants("max(MC,Q) target", args.algo, {"pretrain": "none", "target": "max_mc"} | extra)
-                + sweep_variants("scratch", args.algo, {"pretrain": "none"} | extra))
-    return make_study(args.env, args.algo, args.level, args, variants=variants, reference="scratch",
-                      name=f"qtransformer-{args.env}-{args.level}-{args.algo}")
+    extra = given(args)  # the max(MC, Q) target is TD3+BC's (`TD3BCConfig.target`)
+    variants = (sweep_variants("pretrained", "td3bc", {"pretrain": "actor+critic"} | extra)
+                + sweep_variants("max(MC,Q) target", "td3bc", {"pretrain": "none", "target": "max_mc"} | extra)
+                + sweep_variants("scratch", "td3bc", {"pretrain": "none"} | extra))
+    return make_study(args.env, "td3bc", args.level, args, variants=variants, reference="scratch",
+                      name=f"qtransformer-{args.env}-{args.level}-td3bc")
 
 
 def make_parser():
-    p = parser("experiments.qtransformer", __doc__, updates=20_000, eval_every=2_000)
-    p.set_defaults(algo="td3bc")
-    return p
+    return parser("experiments.qtransformer", __doc__, updates=20_000, eval_every=2_000, omit=("pretrain", "algo"))
 
 
 def main(argv=None) -> int:

@@ -20,7 +20,7 @@ def build(args):
 
 
 def make_parser():
-    p = parser("experiments.replay", __doc__, updates=30_000, eval_every=2_500)
+    p = parser("experiments.replay", __doc__, updates=30_000, eval_every=2_500, omit=("level",))
     p.add_argument("--levels", nargs="+", choices=("medium-replay", "full-replay"),
                    default=["medium-replay"],
                    help="default medium-replay; full-replay needs a shipped <env>-expert and its 1M-step SAC run")

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.common import OneLineParser
+from experiments.common import OneLineParser, UsageError, refuse_existing
 from offrl_jax.checkpoint import atomic_write_text
 
 
@@ -132,7 +132,7 @@ def _fmt(x: float | None) -> str:
 
 def main(argv=None) -> int:
     ap = OneLineParser(prog="experiments.theory", description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--mdps", type=int, default=20)
     ap.add_argument("--states", type=int, default=50)
     ap.add_argument("--actions", type=int, default=4)
@@ -142,10 +142,16 @@ def main(argv=None) -> int:
     ap.add_argument("--delta", type=float, default=1e-3, help="target error as a fraction of ||Q*||")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, default=None, help="write rows.json, summary.json and theory.png here")
+    ap.add_argument("--overwrite", action="store_true", help="replace the files of an earlier run in --out")
     ap.add_argument("--json", action="store_true", help="print the summary as JSON")
     args = ap.parse_args(argv)
     if not 0 < args.gamma < 1 or args.mdps <= 0 or args.states <= 1 or args.actions <= 1:
         print("error: need 0 < gamma < 1, mdps > 0, states > 1, actions > 1", file=sys.stderr)
+        return 2
+    try:
+        refuse_existing(args.out, args.overwrite)
+    except UsageError as e:
+        print(f"error: {e}", file=sys.stderr)
         return 2
     rows = run(args.mdps, args.states, args.actions, args.gamma, args.eps, args.betas, args.delta, args.seed)
     summary = table(rows)

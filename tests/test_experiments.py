@@ -48,6 +48,8 @@ def curves_without_time(path: Path) -> list[dict]:
     (["--actor-pretrain-fraction", "0.5"], "'actor_pretrain_fraction' is not a hyper-parameter of td3bc"),
     (["--dataset-path", "/nonexistent/file.hdf5"], "/nonexistent/file.hdf5"),
     (["--resume", "/nonexistent/run"], "nothing to resume"),
+    (["--updates", "5000"], "pre-training updates (10000) exceed the total budget (5000)"),
+    (["--updates", "20000", "--eval-every", "1001"], "must be multiples of 2"),  # TD3's 2-update call grid
 ])
 def test_bad_input_is_one_line_and_writes_nothing(tmp_path, args, message):
     out = tmp_path / "out"
@@ -66,6 +68,19 @@ def test_existing_output_is_never_overwritten(tmp_path, tiny_hdf5):
     result = cli("--dataset-path", tiny_hdf5, "--out", out, *TINY, timeout=120)
     assert result.returncode == 2 and "exists and is not empty" in result.stderr
     assert (out / "keep.txt").read_text() == "precious"
+    result = cli("--dataset-path", tiny_hdf5, "--out", out, "--overwrite", *TINY, timeout=120)
+    assert result.returncode == 2 and "holds no earlier run (no config.json)" in result.stderr  # not a run: kept
+    assert (out / "keep.txt").read_text() == "precious"
+
+
+def test_overwrite_replaces_an_earlier_run_only_once_the_new_one_can_start(tmp_path, tiny_hdf5):
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "config.json").write_text("{}")
+    (out / "summary.json").write_text("earlier")
+    result = cli("--dataset-path", tmp_path / "missing.hdf5", "--out", out, "--overwrite", *TINY, timeout=120)
+    assert result.returncode == 2 and "missing.hdf5" in result.stderr
+    assert (out / "summary.json").read_text() == "earlier"  # the data failed to load: nothing deleted
 
 
 def test_kill_and_resume_equals_uninterrupted_run(tmp_path, tiny_hdf5):

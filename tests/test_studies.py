@@ -1,7 +1,8 @@
 """Every study module builds the variants the paper's figure needs (no training here)."""
 import pytest
 
-from experiments import ablation, figure2, lambda_sweep, layernorm, mujoco_medium, qtransformer, replay
+from experiments import ablation, adroit_door, figure2, lambda_sweep, layernorm, mujoco_medium, qtransformer, replay
+from experiments.common import UsageError
 
 
 def build(module, argv):
@@ -53,10 +54,31 @@ def test_preset_paper():
     assert len(studies) == 6 and all(s.updates == 1_000_000 for s in studies)
 
 
-@pytest.mark.parametrize("algo", ["edac", "cql"])
-def test_qtransformer_target_is_td3bc_only(algo):
-    with pytest.raises(ValueError, match="not a hyper-parameter"):
-        build(qtransformer, ["--algo", algo])
+@pytest.mark.parametrize("module, argv", [
+    (qtransformer, ["--algo", "edac"]),  # the max(MC, Q) target is TD3+BC's
+    (ablation, ["--pretrain", "actor"]),
+    (lambda_sweep, ["--lam", "0.5"]),  # --lambdas
+    (layernorm, ["--no-actor-ln"]),
+    (replay, ["--level", "medium"]),  # --levels
+    (figure2, ["--env", "walker2d"]),  # --envs
+    (figure2, ["--preset", "paper"]),
+    (adroit_door, ["--updates", "5000"]),  # --scale
+])
+def test_a_study_does_not_accept_a_flag_it_would_ignore(module, argv, capsys):
+    with pytest.raises(SystemExit) as e:
+        module.main(argv)
+    assert e.value.code == 2 and capsys.readouterr().err.startswith("error: unrecognized arguments")
+
+
+def test_preset_paper_refuses_the_flags_it_sets():
+    with pytest.raises(UsageError, match="--preset paper sets --env, --updates itself"):
+        build(mujoco_medium, ["--preset", "paper", "--env", "walker2d", "--updates", "1000"])
+
+
+def test_figure2_num_critics_is_edac_only():
+    studies = {s.name: s for s in build(figure2, ["--envs", "hopper", "--num-critics", "4"])}
+    assert all("num_critics" not in dict(v.overrides) for v in studies["figure2-hopper-td3bc"].variants)
+    assert all(dict(v.overrides)["num_critics"] == 4 for v in studies["figure2-hopper-edac"].variants)
 
 
 def test_alpha_sweep_builds_one_variant_per_value_and_groups_them():
@@ -70,3 +92,17 @@ def test_alpha_sweep_builds_one_variant_per_value_and_groups_them():
     assert all(name is None for _, name in sweep_groups(lam.variants))
     with pytest.raises(ValueError, match="sweep one hyper-parameter at a time"):
         build(mujoco_medium, ["--alpha", "1", "2", "--eta", "1", "2"])
+
+
+def test_a_multi_study_run_saves_every_study_for_resume(tmp_path):
+    from experiments.common import saved_studies, studies_json
+
+    studies = build(figure2, ["--envs", "hopper", "walker2d", "--algos", "td3bc", "--alpha", "1", "2.5"])
+    (tmp_path / "config.json").write_text(studies_json(studies))  # what a new run writes before its first study
+    assert len(studies) == 2 and saved_studies(tmp_path) == studies  # the ones not begun yet included
+    (study,) = build(mujoco_medium, ["--hidden", "64", "64"])
+    (tmp_path / "config.json").write_text(study.to_json())
+    assert saved_studies(tmp_path) == study
+    (tmp_path / "config.json").write_text('{"name": "x"}')
+    with pytest.raises(UsageError, match="not a saved study"):
+        saved_studies(tmp_path)
