@@ -80,6 +80,14 @@ def generate(name: str, *, transitions: int | None = None, out_dir=None, seed: i
     return Path(_generate(name, transitions=transitions, out_dir=out_dir, seed=seed))
 
 
+def _generation_cap(path: Path) -> int | None:
+    """The `--transitions` cap a generated dataset was made with (None: full size, or not recorded)."""
+    try:
+        return json.loads((Path(path) / "offrl_jax.json").read_text()).get("transitions_cap")
+    except (OSError, ValueError):
+        return None
+
+
 def _load_generated(name: str, transitions, clip_actions, generate_if_missing: bool) -> Dataset:
     path = cached_path(name)
     if not is_cached(name):
@@ -92,6 +100,9 @@ def _load_generated(name: str, transitions, clip_actions, generate_if_missing: b
     if transitions is not None and len(ds) != transitions:
         warnings.warn(f"{path}: cached '{name}' has {len(ds)} transitions, not the {transitions} asked for; "
                       "delete the directory to generate it again", stacklevel=3)
+    elif transitions is None and _generation_cap(path) is not None:  # a quick --transitions run cached a small one
+        warnings.warn(f"{path}: cached '{name}' was generated capped at {_generation_cap(path):,} transitions "
+                      "(--transitions), not at full size; delete the directory to generate it in full", stacklevel=3)
     return dataclasses.replace(ds, name=name)
 
 

@@ -166,6 +166,10 @@ def test_default_cache_dir_is_a_minari_id_that_minari_lists(tmp_path, monkeypatc
     monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "datasets"))
     assert "hopper-medium-v0" in minari.list_local_datasets()
     assert minari.load_dataset("hopper-medium-v0").total_steps == 1000
+    from offrl_jax import datasets
+
+    with pytest.warns(UserWarning, match="generated capped at 1,000 transitions"):  # a full-size run is told
+        assert len(datasets.load("hopper-medium")) == 1000
     out.rename(tmp_path / "datasets" / "hopper-medium")  # a cache from before the -v0 suffix is moved, not redone
     assert dataset_dir("hopper-medium") == out and (out / "data" / "metadata.json").is_file()
 

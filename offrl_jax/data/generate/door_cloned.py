@@ -203,7 +203,7 @@ def generate_door_cloned(transitions: int | None = DEFAULT_TRANSITIONS, out_dir:
     from offrl_jax.data.generate.collect import summarize
     from offrl_jax.envs import get_env_spec
 
-    transitions = int(transitions or DEFAULT_TRANSITIONS)
+    cap, transitions = transitions, int(transitions or DEFAULT_TRANSITIONS)
     out = Path(out_dir) if out_dir is not None else dataset_dir(NAME)
     if out.exists() and not overwrite:
         raise FileExistsError(f"{out} exists; pass overwrite=True to replace it")
@@ -214,7 +214,7 @@ def generate_door_cloned(transitions: int | None = DEFAULT_TRANSITIONS, out_dir:
     half = source["rollouts"]["transitions"]
     info = {
         "name": NAME, "env": "door", "gym_id": spec.gym_id, "level": "cloned", "seed": seed,
-        "transitions_cap": transitions, "algorithm": "BC", "source": source,
+        "transitions_cap": cap, "algorithm": "BC", "source": source,
         "ref_min_score": spec.ref_min_score, "ref_max_score": spec.ref_max_score,
         "stats": summarize(ds), "stats_rollouts": summarize(ds.select(slice(0, half))),
         "stats_demos": summarize(ds.select(slice(half, None))) if half < len(ds) else None,
