@@ -92,6 +92,12 @@ def test_pretrain_critic_loss_modes():
     # loss mode: normalised, so 0.5 * 1 + 0.5 * 1 = 1 whatever the reduction over critics
     A(L.pretrain_critic_loss(q, mc, lambda: td, 0.5), 1.0)
     A(L.pretrain_critic_loss(q, mc, lambda: td, 0.5, per_critic="mean"), 1.0)
+    # ...so its gradient is what it says: L_MC = 3, L_TD = (4 + 4) / 2 + (1 + 1) / 2 = 5, d/dq of a batch-mean square
+    # over B = 2 is (q - target); 0.5 / 3 * (q - R) + 0.5 / 5 * (q - y)
+    expected = [[0 / 6 - 2 / 10, 2 / 6 + 2 / 10], [1 / 6 - 1 / 10, 1 / 6 + 1 / 10]]
+    for per_critic in ("sum", "mean"):
+        grad = jax.grad(L.pretrain_critic_loss)(q, mc, lambda: td, 0.5, per_critic=per_critic)
+        A(grad, expected, rtol=1e-5)
 
 
 def test_td3bc_actor_loss():
@@ -139,8 +145,10 @@ def test_cql_uniform_penalty():
     # temperature 2: 2 * logsumexp(0, ln 9 / 2) = 2 ln(1 + 3) = 2 ln 4; q_data = 0
     q_u = jnp.array([[[0.0, np.log(9.0)]]])
     A(L.cql_uniform_penalty(q_u, jnp.zeros((1, 1)), temperature=2.0), 2 * np.log(4.0), rtol=1e-6)
-    # two critics sum
-    A(L.cql_uniform_penalty(jnp.zeros((2, 1, 1)), jnp.zeros((2, 1))), 0.0, atol=1e-7)
+    # two critics sum (a mean would give 1.5): (0 + 1) + (0 + 2)
+    A(L.cql_uniform_penalty(jnp.zeros((2, 1, 1)), jnp.array([[-1.0], [-2.0]])), 3.0, rtol=1e-6)
+    # the batch is averaged (a sum would give 2): mean(0 - 0, 0 + 2)
+    A(L.cql_uniform_penalty(jnp.zeros((1, 2, 1)), jnp.array([[0.0, -2.0]])), 1.0, rtol=1e-6)
 
 
 def test_cql_importance_penalty():
@@ -149,3 +157,32 @@ def test_cql_importance_penalty():
     A(L.cql_importance_penalty(z3, z3, z2, z3, z2, z2, act_dim=1), np.log(4.0), rtol=1e-6)
     # A = 2: -2 ln 0.5 = ln 4 -> ln(4 + 1 + 1) = ln 6
     A(L.cql_importance_penalty(z3, z3, z2, z3, z2, z2, act_dim=2), np.log(6.0), rtol=1e-6)
+    # signs and the sum over critics: log pi = -ln 3 adds ln 3 (exp: 3), random adds ln 2 (exp: 2), next-policy
+    # exp 0 = 1 -> ln 6 per critic; q_data 1 and 2 -> 2 ln 6 - 3 (a flipped log-prob sign gives 2 ln(10/3) - 3)
+    lp = jnp.full((1, 1), -np.log(3.0))
+    q_data = jnp.array([[1.0], [2.0]])
+    z3 = jnp.zeros((2, 1, 1))
+    A(L.cql_importance_penalty(z3, z3, lp, z3, z2, q_data, act_dim=1), 2 * np.log(6.0) - 3, rtol=1e-6)
+    # the policy's log-probs are constants here (CORL detaches them)
+    grad = jax.grad(lambda lp: L.cql_importance_penalty(z3, z3, lp, z3, z2, q_data, act_dim=1))(lp)
+    A(grad, [[0.0]])
+
+
+def test_edac_diversity_is_a_batch_mean():
+    # state 0: aligned (2 / (N - 1) = 2), state 1: orthogonal (0) -> 1 (a batch sum would give 2)
+    A(L.edac_diversity_loss(jnp.array([[[1.0, 0.0], [1.0, 0.0]], [[3.0, 0.0], [0.0, 2.0]]])), 1.0, rtol=1e-6)
+
+
+def test_target_policy_smoothing_noise_and_clip():
+    a = jnp.zeros((10_000, 1))
+    assert float(jnp.std(L.target_policy_smoothing(jax.random.PRNGKey(0), a, noise=0.2, clip=10.0))) == (
+        pytest.approx(0.2, abs=0.01))  # noise * N(0, 1), unclipped
+    smoothed = L.target_policy_smoothing(jax.random.PRNGKey(0), a, noise=1.0, clip=0.3)
+    A([smoothed.min(), smoothed.max()], [-0.3, 0.3])  # the noise is clipped to +-clip
+    A(L.target_policy_smoothing(jax.random.PRNGKey(0), jnp.full((100, 1), 0.9), 1.0, 0.5).max(), 1.0)  # then to [-1, 1]
+
+
+def test_temperature_is_a_constant_in_the_actor_losses():
+    lp = jnp.array([0.5, -1.0])
+    A(jax.grad(lambda a: L.soft_bc_loss(lp, lp, a))(jnp.array(2.0)), 0.0)
+    A(jax.grad(lambda a: L.sac_actor_loss(jnp.ones((2, 2)), lp, a))(jnp.array(2.0)), 0.0)

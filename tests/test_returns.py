@@ -57,3 +57,11 @@ def test_soft_returns_alpha_scales_bonus_and_zero_alpha_is_hard():
                                                                                        np.zeros(2), 0.5))
     # alpha 2: r'_0 = 1 + .5*2*2 = 3, G0 = 3 + .5*1 = 3.5
     A(soft_returns_to_go(r, h, np.array([0, 1.0]), np.zeros(2), 0.5, 2.0), [3.5, 1.0])
+
+
+def test_soft_returns_dataset_end_gets_the_tail_and_timeout_tail_false_gives_none():
+    # no flags: row 1 is the dataset end, treated as a time-out: r' = [2, 3], tail 3 / (1 - .5) = 6, G0 = 2 + .5 * 6
+    r, h = np.array([1.0, 1.0], np.float32), np.array([2.0, 4.0], np.float32)
+    A(soft_returns_to_go(r, h, np.zeros(2), np.zeros(2), 0.5, 1.0), [5.0, 6.0])
+    # the authors' stored code's convention: no tail, G0 = 2 + .5 * 3
+    A(soft_returns_to_go(r, h, np.zeros(2), np.zeros(2), 0.5, 1.0, timeout_tail=False), [3.5, 3.0])

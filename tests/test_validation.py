@@ -6,8 +6,9 @@ from offrl_jax.runner import Study, Variant
 
 
 @pytest.mark.parametrize("algo, overrides, message", [
-    ("td3bc", {"gamma": 0.0}, "gamma = 0.0 must be in (0, 1]"),
-    ("td3bc", {"gamma": 1.01}, "gamma = 1.01 must be in (0, 1]"),
+    ("td3bc", {"gamma": 0.0}, "gamma = 0.0 must be in (0, 1)"),
+    ("td3bc", {"gamma": 1.0}, "gamma = 1.0 must be in (0, 1)"),
+    ("td3bc", {"gamma": 1.01}, "gamma = 1.01 must be in (0, 1)"),
     ("edac", {"tau": 0.0}, "tau = 0.0 must be in (0, 1]"),
     ("edac", {"tau": 1.5}, "tau = 1.5 must be in (0, 1]"),
     ("td3bc", {"lam": -0.1}, "lam = -0.1 must be in [0, 1]"),

@@ -120,7 +120,7 @@ def split_budget(total: int, pretrain: int) -> tuple[int, int]:
 def validate_common(cfg) -> None:
     """Reject invalid hyper-parameters with one line naming the field (shared by every config)."""
     checks = [
-        ("gamma", 0.0 < cfg.gamma <= 1.0, "must be in (0, 1]"),
+        ("gamma", 0.0 < cfg.gamma < 1.0, "must be in (0, 1) (a time-out's return tail is r / (1 - gamma))"),
         ("tau", 0.0 < cfg.tau <= 1.0, "must be in (0, 1]"),
         ("lam", 0.0 <= cfg.lam <= 1.0, "must be in [0, 1]"),
         ("actor_lr", cfg.actor_lr > 0, "must be positive"),
