@@ -16,6 +16,7 @@ from collections import defaultdict
 from pathlib import Path
 
 from experiments.common import OneLineParser
+from offrl_jax.runner import summary_table as table
 
 
 def summaries(path: Path) -> list[Path]:
@@ -25,47 +26,6 @@ def summaries(path: Path) -> list[Path]:
     if not found:
         raise FileNotFoundError(f"{path}: no summary.json here or in its sub-directories")
     return found
-
-
-def table(summary: list[dict]) -> str:
-    """One markdown table.  In a sweep each variant has its own reference (the scratch run with the same swept
-    value), so when the asymptotes differ they get a column instead of the header."""
-    first = summary[0]
-    asymptotes = {round(s["asymptote"], 6) for s in summary if _known(s["asymptote"])}
-    per_variant = len(asymptotes) > 1
-    trend = first.get("asymptote_trend")
-    head = f"{first['dataset']}, {len(first['seeds'])} seeds, {first['updates']:,} updates per variant"
-    if per_variant:
-        head += "; asymptote (final of the from-scratch run with the same swept value) per variant"
-    elif not asymptotes:
-        head += "; no from-scratch reference, so no asymptote"
-    else:
-        head += (f"; asymptote (from-scratch final) {first['asymptote']:.1f}"
-                 + (f", its trend over the last 20 % of evaluations {trend:+.1f}" if trend is not None else ""))
-    cols = "| variant | final score | updates to 90 % | seconds to 90 % | pre-training updates |"
-    rule = "|---|--:|--:|--:|--:|"
-    if per_variant:
-        cols, rule = cols + " asymptote (trend) |", rule + "--:|"
-    lines = [head, "", cols, rule]
-    for s in summary:
-        u = "never" if s["updates_to_90pct"] is None else f"{s['updates_to_90pct']:,}"
-        t = "never" if s["seconds_to_90pct"] is None else f"{s['seconds_to_90pct']:.0f}"
-        gone = s.get("seeds_diverged") or []  # older summaries lack the key
-        variant = s["variant"] + (f" ({len(gone)} seed(s) diverged, not in the mean)" if gone else "")
-        final = f"{s['final_score_mean']:.1f} ± {s['final_score_ci95']:.1f}" if _known(s["final_score_mean"]) else "n/a"
-        row = (f"| {variant} | {final} | {u} | {t} | "
-               f"{s['pretrain_updates']:,} |")
-        if per_variant:
-            tr = s.get("asymptote_trend")
-            row += (f" {s['asymptote']:.1f}" if _known(s["asymptote"]) else " n/a") + (
-                f" ({tr:+.1f})" if tr is not None else "") + " |"
-        lines.append(row)
-    return "\n".join(lines)
-
-
-def _known(x) -> bool:
-    """A number summary.json has (null, or NaN in older files, where there is none)."""
-    return x is not None and x == x
 
 
 def curve_table(curves: Path) -> str:

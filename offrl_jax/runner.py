@@ -419,11 +419,46 @@ def plot_curves(path: Path, study: Study, rows: list[dict], pretrain_ends: dict[
     atomic_write_bytes(path, buffer.getvalue())
 
 
-def print_table(summary: list[dict]) -> None:
-    print(f"{'variant':<24} {'final score':>16} {'updates to 90%':>15} {'seconds to 90%':>15}")
+def summary_table(summary: list[dict]) -> str:
+    """One markdown table.  In a sweep each variant has its own reference (the scratch run with the same swept
+    value), so when the asymptotes differ they get a column instead of the header."""
+    first = summary[0]
+    asymptotes = {round(s["asymptote"], 6) for s in summary if _known(s["asymptote"])}
+    per_variant = len(asymptotes) > 1
+    trend = first.get("asymptote_trend")
+    head = f"{first['dataset']}, {len(first['seeds'])} seeds, {first['updates']:,} updates per variant"
+    if per_variant:
+        head += "; asymptote (final of the from-scratch run with the same swept value) per variant"
+    elif not asymptotes:
+        head += "; no from-scratch reference, so no asymptote"
+    else:
+        head += (f"; asymptote (from-scratch final) {first['asymptote']:.1f}"
+                 + (f", its trend over the last 20 % of evaluations {trend:+.1f}" if trend is not None else ""))
+    cols = "| variant | final score | updates to 90 % | seconds to 90 % | pre-training updates |"
+    rule = "|---|--:|--:|--:|--:|"
+    if per_variant:
+        cols, rule = cols + " asymptote (trend) |", rule + "--:|"
+    lines = [head, "", cols, rule]
     for s in summary:
         u = "never" if s["updates_to_90pct"] is None else f"{s['updates_to_90pct']:,}"
         t = "never" if s["seconds_to_90pct"] is None else f"{s['seconds_to_90pct']:.0f}"
-        gone = s.get("seeds_diverged") or []
-        note = f"  ({len(gone)} seed(s) diverged, left out: {gone})" if gone else ""
-        print(f"{s['variant']:<24} {s['final_score_mean']:>8.1f} ± {s['final_score_ci95']:<5.1f} {u:>15} {t:>15}{note}")
+        gone = s.get("seeds_diverged") or []  # older summaries lack the key
+        variant = s["variant"] + (f" ({len(gone)} seed(s) diverged, not in the mean)" if gone else "")
+        final = f"{s['final_score_mean']:.1f} ± {s['final_score_ci95']:.1f}" if _known(s["final_score_mean"]) else "n/a"
+        row = (f"| {variant} | {final} | {u} | {t} | "
+               f"{s['pretrain_updates']:,} |")
+        if per_variant:
+            tr = s.get("asymptote_trend")
+            row += (f" {s['asymptote']:.1f}" if _known(s["asymptote"]) else " n/a") + (
+                f" ({tr:+.1f})" if tr is not None else "") + " |"
+        lines.append(row)
+    return "\n".join(lines)
+
+
+def _known(x) -> bool:
+    """A number summary.json has (null, or NaN in older files, where there is none)."""
+    return x is not None and x == x
+
+
+def print_table(summary: list[dict]) -> None:
+    print(summary_table(summary))
