@@ -12,13 +12,14 @@ in the same program) or, for one seed, `single` (no seed axis at all).
 """
 from __future__ import annotations
 
-import argparse
 import time
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import optax
+
+from offrl_jax.cli import OneLineParser
 
 OBS, ACT, HIDDEN, BATCH, ROWS = 11, 3, 256, 256, 100_000
 
@@ -150,7 +151,7 @@ def run(layer_norm=True, fused=False, seeds=1, mode="single", calls=200, reps=5)
 
 
 def main(argv=None) -> float:
-    p = argparse.ArgumentParser(prog="benchmarks.handwritten", description=__doc__.split("\n\n")[0])
+    p = OneLineParser(prog="benchmarks.handwritten", description=__doc__.split("\n\n")[0])
     p.add_argument("--no-layer-norm", action="store_true")
     p.add_argument("--fused-ln", action="store_true", help="LayerNorm+ReLU with a hand-written VJP")
     p.add_argument("--seeds", type=int, default=1)

@@ -19,6 +19,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from offrl_jax.cli import OneLineParser
+
 RESULTS_DIR = Path("results/benchmarks")
 
 
@@ -47,8 +49,8 @@ def child(algo: str, seeds: int, transitions: int) -> dict:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="benchmarks.memory", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = OneLineParser(prog="benchmarks.memory", description=__doc__,
+                      formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--algos", nargs="+", default=["td3bc", "edac"], choices=["td3bc", "edac", "td3bc_cql", "edac_bc"])
     p.add_argument("--seeds", nargs="+", type=int, default=[1, 8])
     p.add_argument("--transitions", type=int, default=1_000_000)

@@ -38,6 +38,7 @@ import numpy as np
 
 from benchmarks.flops import chain_flops, update_flops
 from offrl_jax.algos import make_algorithm, make_config
+from offrl_jax.cli import OneLineParser
 from offrl_jax.data.dataset import Dataset
 from offrl_jax.driver import CHUNK, INIT, device_data, make_chunk_fn, seed_keys, seed_sharding
 
@@ -275,7 +276,7 @@ def markdown(records: list[dict[str, Any]]) -> str:
 
 
 def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawTextHelpFormatter)
+    p = OneLineParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--algo", nargs="*", help="only these registry names (default: all)")
     p.add_argument("--seeds", nargs="*", type=int, default=[1, 2, 4, 8], help="vmapped seed counts (default 1 2 4 8)")
     p.add_argument("--phase", nargs="*", help="only these phase labels (e.g. offline_rl)")

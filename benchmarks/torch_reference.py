@@ -12,7 +12,6 @@ diversity loss runs its own second forward pass of the ensemble (CORL's `_critic
 """
 from __future__ import annotations
 
-import argparse
 import copy
 import json
 import math
@@ -24,6 +23,8 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import nn
+
+from offrl_jax.cli import OneLineParser
 
 OBS_DIM, ACT_DIM, BATCH, ROWS = 11, 3, 256, 100_000
 
@@ -278,7 +279,7 @@ def compare(algos: list[str], rounds: int) -> None:
 
 
 def main(argv: list[str] | None = None) -> None:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p = OneLineParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--algo", nargs="*", default=["td3bc", "edac"], choices=["td3bc", "edac"])
     p.add_argument("--json", action="store_true")
     p.add_argument("--reps", type=int, default=3)

@@ -17,6 +17,7 @@ from pathlib import Path
 
 from offrl_jax import datasets
 from offrl_jax.checkpoint import atomic_write_text
+from offrl_jax.cli import OneLineParser  # noqa: F401  (re-exported: the studies import it from here)
 from offrl_jax.data.dataset import DatasetError
 from offrl_jax.runner import Diverged, Study, print_table, run_study
 
@@ -36,15 +37,6 @@ def positive_int(text: str) -> int:
     if value <= 0:
         raise argparse.ArgumentTypeError(f"expected a positive integer, got '{text}'")
     return value
-
-
-class OneLineParser(argparse.ArgumentParser):
-    def __init__(self, *args, **kwargs):  # no prefix matching: "--pretrain" must not silently mean "--pretrain-updates"
-        super().__init__(*args, **{"allow_abbrev": False} | kwargs)
-
-    def error(self, message: str):  # argparse prints usage + error; we print one line
-        print(f"error: {message}", file=sys.stderr)
-        sys.exit(2)
 
 
 def run_args(parser: argparse.ArgumentParser, updates: int | None, eval_every: int | None, seeds: int = 3) -> None:

@@ -19,6 +19,7 @@ import sys
 import warnings
 from pathlib import Path
 
+from offrl_jax.cli import OneLineParser
 from offrl_jax.data.dataset import Dataset, DatasetError, dataset_dir
 from offrl_jax.data.readers import load_dataset_path, minari_root, read_door_npz, read_minari
 from offrl_jax.envs import get_env_spec, normalized_score
@@ -148,15 +149,10 @@ def summary(ds: Dataset) -> dict:
 
 
 # ------------------------------------------------------------------------------------------------------------ CLI
-class _Parser(argparse.ArgumentParser):
-    def error(self, message):  # one line, like every other error of this CLI
-        print(f"error: {message}", file=sys.stderr)
-        sys.exit(2)
-
-
 def _parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="python -m offrl_jax.datasets", description="Offline RL datasets: list, inspect, generate.")
-    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    parser = OneLineParser(prog="python -m offrl_jax.datasets",
+                           description="Offline RL datasets: list, inspect, generate.")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
     sub.add_parser("list", help="known dataset names and which are cached")
     info = sub.add_parser("info", help="one JSON line describing a dataset (name, file, directory or Minari id)")
     info.add_argument("dataset", help="a known name (hopper-medium, door-human, ...), a D4RL .hdf5 file, a Minari "

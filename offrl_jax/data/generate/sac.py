@@ -40,6 +40,7 @@ import optax
 
 from offrl_jax import losses
 from offrl_jax.checkpoint import atomic_write_bytes, atomic_write_text
+from offrl_jax.cli import OneLineParser
 from offrl_jax.data.generate.collect import ACTOR_HIDDEN, actor_module, evaluate, make_gen_env
 from offrl_jax.data.generate.replay import ReplayBuffer, chunk_range, load_replay
 from offrl_jax.envs import get_env_spec, normalized_score
@@ -333,7 +334,7 @@ def _reload_replay(out: Path, buffer: ReplayBuffer, start: int) -> None:
 
 
 def main(argv: list[str] | None = None) -> None:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = OneLineParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--env", help="hopper | halfcheetah | walker2d (required unless --resume)")
     p.add_argument("--steps", type=int, default=None, help="total env steps (default 1M; on --resume the run's own)")
     p.add_argument("--out", help="run directory (must not hold a run already)")

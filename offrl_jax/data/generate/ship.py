@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from offrl_jax.cli import OneLineParser
 from offrl_jax.data.generate.collect import MEDIUM_TARGET_SCORE, POLICY_DIR, POLICY_INDEX, evaluate, load_policy
 from offrl_jax.envs import normalized_score
 
@@ -110,7 +111,7 @@ def ship(run_dir: str | Path, level: str, step: int | None = None, episodes: int
 
 
 def main(argv: list[str] | None = None) -> None:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = OneLineParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--run", required=True, help="SAC run directory")
     p.add_argument("--level", required=True, choices=["medium", "expert"])
     p.add_argument("--step", type=int, default=None, help="ship this checkpoint instead of the automatic choice")
