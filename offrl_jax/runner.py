@@ -363,6 +363,7 @@ def _summarize(study: Study, rows: list[dict], pretrain_ends: dict[str, int]) ->
             # the "asymptote" is not one yet (the budget ended while the reference was still moving)
             "asymptote_trend": trend,
             "updates_to_90pct": int(updates[reached[0]]) if len(reached) else None,
+            # training wall-clock of the program that trained this variant: in a vmapped sweep, the whole group's
             "seconds_to_90pct": float(seconds[reached[0]]) if len(reached) else None,
             "pretrain_updates": pretrain_ends.get(v.label, 0),
             # seeds whose final score is not finite (diverged and stopped): the mean and CI above leave them out
