@@ -61,8 +61,8 @@ def run_args(parser: argparse.ArgumentParser, updates: int | None, eval_every: i
     g.add_argument("--overwrite", action="store_true",
                    help="replace the earlier run in --out (only a directory holding a run's config.json)")
     g.add_argument("--resume", type=Path, default=None,
-                   help="continue the run saved in this directory, with its saved settings (the flags that choose "
-                        "the study, its variants and its budget are not read)")
+                   help="continue the run saved in this directory with the settings saved there: only --parallel, "
+                        "--no-progress (and --clip-actions, for runs saved before it was recorded) are read")
     g.add_argument("--parallel", type=positive_int, default=2,
                    help="variants trained at once, in threads (default %(default)s: one XLA program at these sizes "
                         "keeps about one CPU core busy); 1 = one after another")
@@ -70,25 +70,33 @@ def run_args(parser: argparse.ArgumentParser, updates: int | None, eval_every: i
 
 
 def output_dir(args, study_name: str) -> tuple[Path, bool]:
-    """(directory, whether an earlier run in it is to be replaced); nothing is deleted or created here."""
+    """(directory, whether an earlier run in it is to be replaced); nothing is deleted here.  The default
+    runs/<study>/<timestamp>[-n] is claimed at once (created empty), so runs started in the same second differ."""
     if args.resume is not None:
         if not (args.resume / "config.json").is_file():
             raise UsageError(f"{args.resume}: nothing to resume (no config.json)")
         return args.resume, False
     if args.out is None:
         stamp = Path("runs") / study_name / time.strftime("%Y%m%d-%H%M%S")
-        out, n = stamp, 1
-        while out.exists():  # two runs started in the same second
-            n += 1
-            out = stamp.with_name(f"{stamp.name}-{n}")
-        return out, False
+        stamp.parent.mkdir(parents=True, exist_ok=True)
+        for n in range(1, 1000):
+            out = stamp if n == 1 else stamp.with_name(f"{stamp.name}-{n}")
+            try:
+                out.mkdir()
+                return out, False
+            except FileExistsError:
+                continue
+        raise UsageError(f"{stamp}: too many runs started in one second")
     if args.out.exists() and not args.out.is_dir():
         raise UsageError(f"{args.out} is a file, not a directory")
     if args.out.exists() and any(args.out.iterdir()):
         if not args.overwrite:
             raise UsageError(f"{args.out} exists and is not empty; pass --overwrite or choose another --out")
-        if not (args.out / "config.json").is_file():
-            raise UsageError(f"{args.out} holds no earlier run (no config.json); --overwrite will not delete it")
+        try:
+            saved_studies(args.out)
+        except (UsageError, OSError):
+            raise UsageError(f"{args.out} holds no earlier run (no saved study in config.json); --overwrite will not "
+                             "delete it") from None
         return args.out, True
     return args.out, False
 
@@ -121,16 +129,24 @@ def saved_studies(out: Path) -> Study | list[Study]:
             return Study.from_json(path.read_text())
         if all(isinstance(s, dict) for s in raw["studies"]):
             return [Study.from_json(json.dumps(s)) for s in raw["studies"]]
-        # runs started before the top-level file held whole studies: each started study's own config.json
-        return [Study.from_json((out / name / "config.json").read_text()) for name in raw["studies"]
-                if (out / name / "config.json").is_file()]
-    except (KeyError, TypeError, json.JSONDecodeError) as e:
+        # runs started before the top-level file held whole studies: only the studies begun have their config
+        begun = [name for name in raw["studies"] if (out / name / "config.json").is_file()]
+        if not begun:
+            raise UsageError(f"{path}: none of its studies had begun; start the run again instead of resuming it")
+        if len(begun) < len(raw["studies"]):
+            lost = ", ".join(n for n in raw["studies"] if n not in begun)
+            print(f"warning: {path} predates saving whole studies; not begun, so not resumed (run them again): "
+                  f"{lost}", file=sys.stderr)
+        return [Study.from_json((out / name / "config.json").read_text()) for name in begun]
+    except (KeyError, TypeError, AttributeError, json.JSONDecodeError) as e:
         raise UsageError(f"{path}: not a saved study ({type(e).__name__}: {e})") from None
 
 
-def load_data(study: Study):
+def load_data(study: Study, clip_actions: bool = False):
+    """The study's dataset (`clip_actions`: also clip, for a resumed run saved before studies recorded it)."""
     source = study.dataset
-    ds = datasets.load(source, transitions=study.transitions, clip_actions=study.clip_actions or None, env=study.env)
+    clip = study.clip_actions or clip_actions or None
+    ds = datasets.load(source, transitions=study.transitions, clip_actions=clip, env=study.env)
     if study.transitions and len(ds) > study.transitions:
         ds = ds.select(slice(0, study.transitions))
     if ds.env is not None and ds.env != study.env:
@@ -142,14 +158,19 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
                argv=None) -> int:
     """Parse, build the study (or studies: each in its own sub-directory), run; expected failures are one line."""
     args = parser.parse_args(argv)
-    out = None
+    out, replace = None, False
     try:
         built = None if args.resume is not None else build(args)  # validates every hyper-parameter and budget
         out, replace = output_dir(args, parser.prog.split(".")[-1])
         if args.resume is not None:
             built = saved_studies(out)
         studies = built if isinstance(built, list) else [built]
-        data = [load_data(study) for study in studies]  # bad data fails here, before anything is written
+        loaded: dict = {}  # bad data fails here, before anything is written; each dataset is loaded once
+        for study in studies:
+            key = (study.dataset, study.env, study.transitions, study.clip_actions)
+            if key not in loaded:
+                loaded[key] = load_data(study, args.clip_actions)
+        data = [loaded[(s.dataset, s.env, s.transitions, s.clip_actions)] for s in studies]
         if replace:
             shutil.rmtree(out)
         if isinstance(built, list) and args.resume is None:
@@ -172,4 +193,7 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
         where = f"; resume with --resume {out}" if out is not None and (out / "config.json").is_file() else ""
         print(f"interrupted{where}", file=sys.stderr)
         return 130
+    finally:  # a claimed timestamped directory that got nothing (the data failed to load) is not left behind
+        if out is not None and args.resume is None and args.out is None and out.is_dir() and not any(out.iterdir()):
+            out.rmdir()
     return 0

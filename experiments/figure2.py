@@ -45,7 +45,7 @@ def build(args):
 
 def make_parser():
     p = parser("experiments.figure2", __doc__, updates=30_000, eval_every=2_500, edac_pretrain=EDAC_PRETRAIN,
-               omit=("env", "algo"))
+               omit=("env", "algo"), num_critics="10, EDAC only")
     p.add_argument("--envs", nargs="+", choices=ENVS, default=list(ENVS))
     p.add_argument("--algos", nargs="+", choices=("td3bc", "edac"), default=["td3bc", "edac"])
     p.add_argument("--edac-updates", type=positive_int, default=16_000, help="EDAC's budget (default %(default)s)")

@@ -28,9 +28,9 @@ LABELS = {"actor+critic": "pretrained", "none": "scratch", "actor": "actor-only"
 
 def parser(prog: str = "experiments.mujoco_medium", doc: str = __doc__, updates: int = 100_000,
            eval_every: int = 5_000, env: str = "hopper", edac_pretrain: dict | None = None, omit: tuple[str, ...] = (),
-           preset: bool = False) -> argparse.ArgumentParser:
+           preset: bool = False, num_critics: str = "per env") -> argparse.ArgumentParser:
     """The flags every MuJoCo study shares; studies pass their own defaults (`edac_pretrain`: the study's EDAC
-    `pretrain_updates` / `actor_pretrain_fraction`, for the help text; default EDACConfig's), leave out the flags
+    `pretrain_updates` / `actor_pretrain_fraction`, and `num_critics`, for the help text), leave out the flags
     they set themselves (`omit`: destinations, e.g. ("pretrain", "lam")), and only the main job has `--preset`."""
     edac = {f: getattr(EDACConfig, f) for f in ("pretrain_updates", "actor_pretrain_fraction")} | (edac_pretrain or {})
     p = OneLineParser(prog=prog, description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -55,7 +55,7 @@ def parser(prog: str = "experiments.mujoco_medium", doc: str = __doc__, updates:
         help="learned LayerNorm scale/bias (default on; --no-ln-affine = the authors' code, faster)")
     add("--alpha", type=float, nargs="+", default=None,
         help="TD3+BC alpha (default: per env); several values = a sweep, vmapped in one program")
-    add("--num-critics", type=int, default=None, help="EDAC/SAC-N ensemble size (default: per env)")
+    add("--num-critics", type=positive_int, default=None, help=f"EDAC/SAC-N ensemble size (default: {num_critics})")
     add("--eta", type=float, nargs="+", default=None,
         help="EDAC diversity weight; several values = a sweep, vmapped in one program")
     add("--actor-pretrain-fraction", type=float, default=None,
@@ -68,7 +68,8 @@ def parser(prog: str = "experiments.mujoco_medium", doc: str = __doc__, updates:
     if preset:
         add("--preset", choices=("paper",), default=None,
             help="paper: 3 envs x {td3bc, edac} medium x 3 seeds x 1M updates (evaluation every 10k), "
-                 "each in its own sub-directory; not with --env/--algo/--level/--updates/--eval-every")
+                 "each in its own sub-directory; --env/--algo/--level/--updates/--eval-every other than their "
+                 "defaults are refused")
     run_args(p, updates=updates, eval_every=eval_every)
     return p
 

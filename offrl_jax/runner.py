@@ -134,8 +134,8 @@ def run_study(study: Study, out_dir: Path, dataset: Dataset, resume: bool = Fals
             with ThreadPoolExecutor(max_workers=parallel) as pool:
                 futures = [pool.submit(run, g) for g in groups]
                 try:
-                    wait(futures, return_when=FIRST_EXCEPTION)  # a failure in any group is seen at once
-                    for future in futures:
+                    done, _ = wait(futures, return_when=FIRST_EXCEPTION)
+                    for future in [f for f in done if f.exception() is not None] + futures:  # a failure first
                         future.result()
                 except BaseException:
                     recorder.stop.set()  # the other variants stop at their next chunk boundary
@@ -225,8 +225,9 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
         return pretrain_end
     every = study.checkpoint_every or study.eval_every
     last_saved = start
-    alive = np.ones(len(driver.members), bool)
     member_names = [(v, seed) for v in group for seed in seeds]  # member j * S + i = (variant j, seed i)
+    last_score = {(r["variant"], r["seed"]): r["score"] for r in rows}  # resumed: a seed that had diverged stays out
+    alive = np.array([math.isfinite(last_score.get((v.label, seed), 0.0)) for v, seed in member_names])
     for chunk in driver.run(phases, study.eval_every, states, start, seconds):
         if recorder.stop.is_set():
             raise Stopped(f"{name} stopped at update {start}; last checkpoint: update {last_saved}")
@@ -425,15 +426,16 @@ def summary_table(summary: list[dict]) -> str:
     value), so when the asymptotes differ they get a column instead of the header."""
     first = summary[0]
     asymptotes = {round(s["asymptote"], 6) for s in summary if _known(s["asymptote"])}
+    known = [s for s in summary if _known(s["asymptote"])]
     per_variant = len(asymptotes) > 1
-    trend = first.get("asymptote_trend")
     head = f"{first['dataset']}, {len(first['seeds'])} seeds, {first['updates']:,} updates per variant"
     if per_variant:
         head += "; asymptote (final of the from-scratch run with the same swept value) per variant"
     elif not asymptotes:
-        head += "; no from-scratch reference, so no asymptote"
+        head += "; no from-scratch asymptote (no reference variant, or every seed of it diverged)"
     else:
-        head += (f"; asymptote (from-scratch final) {first['asymptote']:.1f}"
+        trend = known[0].get("asymptote_trend")
+        head += (f"; asymptote (from-scratch final) {known[0]['asymptote']:.1f}"
                  + (f", its trend over the last 20 % of evaluations {trend:+.1f}" if trend is not None else ""))
     cols = "| variant | final score | updates to 90 % | seconds to 90 % | pre-training updates |"
     rule = "|---|--:|--:|--:|--:|"

@@ -69,14 +69,21 @@ def test_existing_output_is_never_overwritten(tmp_path, tiny_hdf5):
     assert result.returncode == 2 and "exists and is not empty" in result.stderr
     assert (out / "keep.txt").read_text() == "precious"
     result = cli("--dataset-path", tiny_hdf5, "--out", out, "--overwrite", *TINY, timeout=120)
-    assert result.returncode == 2 and "holds no earlier run (no config.json)" in result.stderr  # not a run: kept
+    assert result.returncode == 2 and "holds no earlier run" in result.stderr  # not a run: kept
     assert (out / "keep.txt").read_text() == "precious"
 
 
 def test_overwrite_replaces_an_earlier_run_only_once_the_new_one_can_start(tmp_path, tiny_hdf5):
+    from offrl_jax.runner import Study, Variant
+
     out = tmp_path / "run"
     out.mkdir()
-    (out / "config.json").write_text("{}")
+    (out / "config.json").write_text("{}")  # a config.json that is not a saved study: not a run, never deleted
+    result = cli("--dataset-path", tiny_hdf5, "--out", out, "--overwrite", *TINY, timeout=120)
+    assert result.returncode == 2 and "holds no earlier run" in result.stderr and (out / "config.json").exists()
+    earlier = Study(name="earlier", dataset=str(tiny_hdf5), env="hopper",
+                    variants=(Variant.of("scratch", "td3bc", pretrain="none"),))
+    (out / "config.json").write_text(earlier.to_json())
     (out / "summary.json").write_text("earlier")
     result = cli("--dataset-path", tmp_path / "missing.hdf5", "--out", out, "--overwrite", *TINY, timeout=120)
     assert result.returncode == 2 and "missing.hdf5" in result.stderr

@@ -106,3 +106,54 @@ def test_a_multi_study_run_saves_every_study_for_resume(tmp_path):
     (tmp_path / "config.json").write_text('{"name": "x"}')
     with pytest.raises(UsageError, match="not a saved study"):
         saved_studies(tmp_path)
+
+
+def test_runs_started_in_the_same_second_get_their_own_directories(tmp_path, monkeypatch):
+    import argparse
+
+    from experiments.common import output_dir
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr("time.strftime", lambda fmt: "20260101-000000")
+    args = argparse.Namespace(resume=None, out=None, overwrite=False)
+    first, second = output_dir(args, "study")[0], output_dir(args, "study")[0]
+    assert (first.name, second.name) == ("20260101-000000", "20260101-000000-2") and first.is_dir()
+
+
+def test_an_old_multi_study_config_resumes_the_studies_begun_and_names_the_others(tmp_path, capsys):
+    import json
+
+    from experiments.common import saved_studies
+
+    hopper, walker = build(figure2, ["--envs", "hopper", "walker2d", "--algos", "td3bc"])
+    (tmp_path / "config.json").write_text(json.dumps({"studies": [hopper.name, walker.name]}))  # the old format
+    with pytest.raises(UsageError, match="none of its studies had begun"):
+        saved_studies(tmp_path)
+    (tmp_path / hopper.name).mkdir()
+    (tmp_path / hopper.name / "config.json").write_text(hopper.to_json())
+    assert saved_studies(tmp_path) == [hopper]
+    assert walker.name in capsys.readouterr().err
+
+
+def test_a_failing_parallel_variant_stops_the_others_at_once(tmp_path, monkeypatch, tiny_dataset):
+    """Group 0 runs until told to stop (or 60 s); group 1 fails at once: the run must not wait for group 0."""
+    import time
+
+    from offrl_jax import runner
+    from offrl_jax.runner import Stopped, Study, Variant, run_study
+
+    def fake_group(study, group, swept, ds, out_dir, resume, bar, recorder):
+        if group[0].label == "slow":
+            deadline = time.monotonic() + 60
+            while not recorder.stop.is_set() and time.monotonic() < deadline:
+                time.sleep(0.01)
+            raise Stopped("slow stopped")
+        raise RuntimeError("fast failed")
+
+    monkeypatch.setattr(runner, "_run_group", fake_group)
+    study = Study(name="t", dataset="hopper-medium", env="hopper", updates=1000, eval_every=100,
+                  variants=(Variant.of("slow", "td3bc", pretrain="none"), Variant.of("fast", "cql")))
+    tic = time.monotonic()
+    with pytest.raises(RuntimeError, match="fast failed"):
+        run_study(study, tmp_path, tiny_dataset, progress=False, parallel=2)
+    assert time.monotonic() - tic < 30

@@ -209,7 +209,7 @@ def generate(name: str, transitions: int | None = None, out_dir: str | Path | No
     if name == "door-cloned":
         from offrl_jax.data.generate.door_cloned import generate_door_cloned
 
-        return generate_door_cloned(transitions or 1_000_000, out_dir, seed, overwrite=overwrite, progress=progress)
+        return generate_door_cloned(transitions, out_dir, seed, overwrite=overwrite, progress=progress)
     env, level = parse_name(name)
     out = Path(out_dir) if out_dir is not None else default_dir(name)
     if out.exists() and not overwrite:

@@ -191,7 +191,7 @@ def build_door_cloned(transitions: int = DEFAULT_TRANSITIONS, seed: int = 0, bc_
     return ds, source
 
 
-def generate_door_cloned(transitions: int | None = DEFAULT_TRANSITIONS, out_dir: str | Path | None = None,
+def generate_door_cloned(transitions: int | None = None, out_dir: str | Path | None = None,
                          seed: int = 0, *, overwrite: bool = False, progress: bool = True,
                          bc_updates: int = DEFAULT_BC_UPDATES, noise_std: float = DEFAULT_NOISE_STD,
                          num_envs: int = 16) -> Path:
