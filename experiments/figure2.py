@@ -3,8 +3,9 @@
 CPU-sized defaults (the paper runs 1M updates on a GPU), 3 vmapped seeds: TD3+BC 30k updates (10k pre-training),
 evaluation every 2.5k (~25 min per env on 2 cores); EDAC with 10 critics for 16k updates (12k pre-training: 3k soft
 BC + 9k soft-return critic; `--pretrain-updates` / `--actor-pretrain-fraction` change it), evaluation every 1k.
-EDAC's 10-critic updates run at ~8/s per core for one seed, which is what bounds its budget: ~1.5-2 h per env on 2
-cores (`--seeds 2` for less).  Each (env, algo) pair goes to its own sub-directory.
+EDAC's 10-critic updates are what bound its budget: measured with 2 seeds on one core (session 5, hopper), soft BC
+takes ~10 s per 1k updates, critic pre-training ~190-290 s and EDAC ~480 s, so the from-scratch arm alone takes
+~2 h and the pre-trained arm ~1.2 h (3 seeds: about 1.5x).  Each (env, algo) pair goes to its own sub-directory.
 
     python -m experiments.figure2 [--envs hopper] [--algos td3bc] [--edac-updates 50000] [--seeds 2]
 """
