@@ -1,8 +1,8 @@
 """What every experiment CLI shares: the run flags, the output-directory rules, one-line errors.
 
 Rules: a new run writes to a new timestamped directory under runs/<study>/ unless --out is given; an existing,
-non-empty --out is refused unless --overwrite, and --overwrite replaces only a directory that holds an earlier run
-(its config.json), after the new run's data has loaded; --resume DIR continues the study (or studies) saved in DIR
+non-empty --out is refused unless --overwrite, and --overwrite replaces only a directory whose config.json is a
+saved study, after the new run's data has loaded; --resume DIR continues the study (or studies) saved in DIR
 from the last complete checkpoints.  Bad input -> `error: ...` on stderr, exit 2, no traceback.
 """
 from __future__ import annotations
@@ -59,7 +59,7 @@ def run_args(parser: argparse.ArgumentParser, updates: int | None, eval_every: i
     g.add_argument("--clip-actions", action="store_true", help="clip out-of-bounds dataset actions (with a warning)")
     g.add_argument("--out", type=Path, default=None, help="output directory (default: runs/<study>/<timestamp>)")
     g.add_argument("--overwrite", action="store_true",
-                   help="replace the earlier run in --out (only a directory holding a run's config.json)")
+                   help="replace the earlier run in --out (only a directory whose config.json is a saved study)")
     g.add_argument("--resume", type=Path, default=None,
                    help="continue the run saved in this directory with the settings saved there: only --parallel, "
                         "--no-progress (and --clip-actions, for runs saved before it was recorded) are read")
@@ -154,6 +154,10 @@ def load_data(study: Study, clip_actions: bool = False):
     return ds
 
 
+def _data_key(study: Study) -> tuple:
+    return study.dataset, study.env, study.transitions, study.clip_actions
+
+
 def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parser: argparse.ArgumentParser,
                argv=None) -> int:
     """Parse, build the study (or studies: each in its own sub-directory), run; expected failures are one line."""
@@ -167,10 +171,9 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
         studies = built if isinstance(built, list) else [built]
         loaded: dict = {}  # bad data fails here, before anything is written; each dataset is loaded once
         for study in studies:
-            key = (study.dataset, study.env, study.transitions, study.clip_actions)
-            if key not in loaded:
-                loaded[key] = load_data(study, args.clip_actions)
-        data = [loaded[(s.dataset, s.env, s.transitions, s.clip_actions)] for s in studies]
+            if _data_key(study) not in loaded:
+                loaded[_data_key(study)] = load_data(study, args.clip_actions)
+        data = [loaded[_data_key(s)] for s in studies]
         if replace:
             shutil.rmtree(out)
         if isinstance(built, list) and args.resume is None:

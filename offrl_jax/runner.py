@@ -252,7 +252,7 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
         mean_score = float(np.nanmean(scores)) if alive.any() else float("nan")
         bar.set_postfix_str(f"{name} | {chunk.phase} | {chunk.updates_per_s:.0f} upd/s | score "
                             f"{mean_score:.1f} | eval {time.perf_counter() - tic:.1f}s")
-        # a diverged seed's NaN state is saved too: on resume it is found non-finite again and stays out
+        # checkpoints go on after a partial divergence: on resume the diverged seeds' NaN scores keep them out
         if chunk.update - last_saved >= every or chunk.update == last_update:
             save_checkpoint(ckpt_path, chunk.states, chunk.update, chunk.seconds, rows)
             last_saved = chunk.update
