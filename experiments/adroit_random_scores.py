@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 from tqdm.auto import tqdm
 
-from experiments.common import OneLineParser, UsageError, refuse_existing
+from experiments.common import OneLineParser, refuse_existing
 from offrl_jax.checkpoint import atomic_write_text
 from offrl_jax.envs import ENVS, make_env
 
@@ -50,11 +50,7 @@ def main(argv=None) -> int:
     if args.episodes < 2:
         print("error: --episodes must be >= 2 (for a standard error)", file=sys.stderr)
         return 2
-    try:
-        refuse_existing(args.out, args.overwrite)
-    except UsageError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
+    refuse_existing(ap, args.out, args.overwrite)
     rows = []
     print(f"{'env':<9} {'limit':>5} {'episodes':>8} {'mean':>10} {'s.e.':>7} {'paper':>9} {'diff/s.e.':>9}")
     for name in args.envs:

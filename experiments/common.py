@@ -101,10 +101,11 @@ def output_dir(args, study_name: str) -> tuple[Path, bool]:
     return args.out, False
 
 
-def refuse_existing(out: Path | None, overwrite: bool) -> None:
-    """For commands that write a few named files into --out: refuse a non-empty --out unless --overwrite."""
+def refuse_existing(parser: argparse.ArgumentParser, out: Path | None, overwrite: bool) -> None:
+    """For commands that write a few named files into --out: a non-empty --out without --overwrite is a usage
+    error (one line, exit 2), before any work is done."""
     if out is not None and out.exists() and (not out.is_dir() or any(out.iterdir())) and not overwrite:
-        raise UsageError(f"{out} exists and is not empty; pass --overwrite or choose another --out")
+        parser.error(f"{out} exists and is not empty; pass --overwrite or choose another --out")
 
 
 def study_fields(args) -> dict:

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.common import OneLineParser, UsageError, refuse_existing
+from experiments.common import OneLineParser, refuse_existing
 from offrl_jax.checkpoint import atomic_write_text
 
 
@@ -148,11 +148,7 @@ def main(argv=None) -> int:
     if not 0 < args.gamma < 1 or args.mdps <= 0 or args.states <= 1 or args.actions <= 1:
         print("error: need 0 < gamma < 1, mdps > 0, states > 1, actions > 1", file=sys.stderr)
         return 2
-    try:
-        refuse_existing(args.out, args.overwrite)
-    except UsageError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
+    refuse_existing(ap, args.out, args.overwrite)
     rows = run(args.mdps, args.states, args.actions, args.gamma, args.eps, args.betas, args.delta, args.seed)
     summary = table(rows)
     if args.out:

@@ -425,8 +425,8 @@ def summary_table(summary: list[dict]) -> str:
     """One markdown table.  In a sweep each variant has its own reference (the scratch run with the same swept
     value), so when the asymptotes differ they get a column instead of the header."""
     first = summary[0]
-    asymptotes = {round(s["asymptote"], 6) for s in summary if _known(s["asymptote"])}
     known = [s for s in summary if _known(s["asymptote"])]
+    asymptotes = {round(s["asymptote"], 6) for s in known}
     per_variant = len(asymptotes) > 1
     head = f"{first['dataset']}, {len(first['seeds'])} seeds, {first['updates']:,} updates per variant"
     if per_variant:

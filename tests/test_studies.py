@@ -157,3 +157,14 @@ def test_a_failing_parallel_variant_stops_the_others_at_once(tmp_path, monkeypat
     with pytest.raises(RuntimeError, match="fast failed"):
         run_study(study, tmp_path, tiny_dataset, progress=False, parallel=2)
     assert time.monotonic() - tic < 30
+
+
+@pytest.mark.parametrize("module", ["theory", "adroit_random_scores"])
+def test_commands_writing_into_out_refuse_an_earlier_one(module, tmp_path, capsys):
+    import importlib
+
+    (tmp_path / "summary.json").write_text("earlier")
+    with pytest.raises(SystemExit) as e:
+        importlib.import_module(f"experiments.{module}").main(["--out", str(tmp_path)])
+    assert e.value.code == 2 and "exists and is not empty; pass --overwrite" in capsys.readouterr().err
+    assert (tmp_path / "summary.json").read_text() == "earlier"
