@@ -85,3 +85,17 @@ def test_cql_update_computes_every_loss_from_the_incoming_state():
         assert (float(metrics["critic_loss"]) == float(alone["critic_loss"])) == simultaneous
         kernel = lambda s: s.actor.params["params"]["MLP_0"]["Dense_0"]["kernel"]  # noqa: E731
         assert not np.allclose(kernel(new), kernel(state))  # the actor did step
+
+
+def test_edac_logs_the_hand_over_diagnostics():
+    """EDAC logs how far its actions are from the data (bc_mse, also without a BC term) and the ensemble's spread
+    at the data actions (q_std: the std over critics, batch-mean)."""
+    batch = tiny_batch()
+    cfg = make_config("edac", "door", hidden=(8, 8), num_critics=3)
+    algo = make_algorithm(cfg, 3, 2, 7)
+    state = algo.init(jax.random.PRNGKey(1))
+    _, metrics = algo.rl_update(state, batch, jax.random.PRNGKey(2))
+    q = algo.critic_per_member.apply(state.critic.params, batch["observations"],
+                                     jnp.broadcast_to(batch["actions"], (3, *batch["actions"].shape)))
+    np.testing.assert_allclose(float(metrics["q_std"]), float(jnp.mean(jnp.std(q, axis=0))), rtol=1e-5)
+    assert float(metrics["q_std"]) > 0 and float(metrics["bc_mse"]) > 0

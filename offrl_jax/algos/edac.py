@@ -197,7 +197,8 @@ class EDAC:
         else:
             loss = L.critic_regression_loss(q, td_fn())
             metrics = {}
-        metrics |= {"critic_loss": loss, "q_mean": jnp.mean(q), "diversity": diversity}
+        metrics |= {"critic_loss": loss, "q_mean": jnp.mean(q), "q_std": jnp.mean(jnp.std(q, axis=0)),
+                    "diversity": diversity}
         if cfg.cql_alpha > 0:
             penalty = self.cql_penalty(params, state, batch, q, k_cql)
             loss = loss + cfg.cql_alpha * penalty
@@ -208,11 +209,10 @@ class EDAC:
         action, log_prob = self.sample_policy(params, batch["observations"], key)
         q = self.critic.apply(state.critic.params, batch["observations"], action)
         loss = L.sac_actor_loss(q, log_prob, jnp.exp(state.log_alpha.params))
-        metrics = {"actor_loss": loss, "entropy": -jnp.mean(log_prob)}
+        bc = L.bc_loss(action, batch["actions"])  # logged always: how far the policy has moved from the data
+        metrics = {"actor_loss": loss, "entropy": -jnp.mean(log_prob), "bc_mse": bc}
         if self.cfg.bc_weight > 0:
-            bc = L.bc_loss(action, batch["actions"])
             loss = L.balance_losses(loss, bc, self.cfg.bc_weight)
-            metrics["bc_mse"] = bc
         return loss, metrics
 
     def soft_bc_loss(self, params, state: EDACState, batch: Batch, key: jax.Array):
