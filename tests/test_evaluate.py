@@ -34,3 +34,10 @@ def test_threads_get_their_own_envs():
     t.start()
     t.join()
     assert theirs and theirs[0] is not mine
+
+
+def test_threaded_stepping_gives_the_serial_returns():
+    policy, weights = _linear_policy()
+    serial = ev.evaluate(policy, weights, "hopper", episodes=3, seed=5, workers=1)
+    threaded = ev.evaluate(policy, weights, "hopper", episodes=3, seed=5, workers=4)
+    np.testing.assert_array_equal(serial, threaded)
