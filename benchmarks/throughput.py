@@ -319,6 +319,9 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     data = synthetic_data(args.transitions)
     matmul = matmul_rate()
     log(f"# 1024^2 matmul: {matmul:.1f} GFLOP/s")
+    if jax.default_backend() != "cpu":
+        log("# note: on a GPU the 256-wide chain ('peak') is launch-bound and a scan of whole updates beats it; "
+            "read updates/s, not % of peak")
     if not args.json:
         print(HEADER, flush=True)
     results = []
