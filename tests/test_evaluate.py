@@ -1,4 +1,5 @@
-"""The evaluator's env pool: reused envs give the same returns as fresh ones, and threads never share an env."""
+"""The evaluator: reused envs give the same returns as fresh ones, threads never share an env, and stepping the envs
+in threads gives the serial returns."""
 import threading
 
 import jax.numpy as jnp
