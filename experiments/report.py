@@ -6,6 +6,11 @@ One table per run directory: variant, final score (mean ± 95 % CI over seeds), 
 from-scratch asymptote, with the asymptote and its trend (see `offrl_jax.runner.summarize`).  A directory holding
 several studies (sub-directories with a summary.json each) gives one table per study.  `--curves` adds the
 seed-mean score at every evaluation (rows: variants, columns: updates) from the run's curves.csv.
+
+`--merge OUT` first merges the given run directories (one study, each run training some of its variants, e.g. one
+process per variant on a GPU) into OUT, re-summarised across them (`offrl_jax.runner.merge_runs`), and reports OUT:
+
+    python -m experiments.report --merge runs/door-all runs/door-BC runs/door-CQL
 """
 from __future__ import annotations
 
@@ -16,7 +21,7 @@ from collections import defaultdict
 from pathlib import Path
 
 from experiments.common import OneLineParser
-from offrl_jax.runner import summary_table as table
+from offrl_jax.runner import merge_runs, summary_table as table
 
 
 def summaries(path: Path) -> list[Path]:
@@ -48,14 +53,19 @@ def main(argv=None) -> int:
     p = OneLineParser(prog="experiments.report", description=__doc__)
     p.add_argument("dirs", nargs="+", type=Path, help="run directories (or directories of studies)")
     p.add_argument("--curves", action="store_true", help="also the seed-mean score at every evaluation")
+    p.add_argument("--merge", type=Path, metavar="OUT",
+                   help="merge the run directories (one study, different variants) into OUT (a new directory)")
     args = p.parse_args(argv)
     try:
+        if args.merge:
+            merge_runs(args.dirs, args.merge)
+            args.dirs = [args.merge]
         for d in args.dirs:
             for path in summaries(d):
                 print(f"### {path.parent}\n\n{table(json.loads(path.read_text()))}\n")
                 if args.curves:
                     print(curve_table(path.parent / "curves.csv") + "\n")
-    except (FileNotFoundError, json.JSONDecodeError, KeyError, IndexError) as e:
+    except (FileNotFoundError, FileExistsError, ValueError, KeyError, IndexError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
     return 0

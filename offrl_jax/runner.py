@@ -278,6 +278,61 @@ def write_curves(path: Path, rows: list[dict]) -> None:
     atomic_write_text(path, buffer.getvalue())
 
 
+def read_curves(path: Path) -> list[dict]:
+    """A curves.csv back as rows: seed and update as ints, text columns as text, the rest as floats; empty cells
+    (a metric another variant logs) are left out."""
+    ints, texts = {"seed", "update"}, {"variant", "algo", "phase"}
+    with open(path, newline="") as f:
+        return [{k: v if k in texts else int(v) if k in ints else float(v) for k, v in row.items() if v != ""}
+                for row in csv.DictReader(f)]
+
+
+def pretrain_ends_of(rows: list[dict]) -> dict[str, int]:
+    """Per variant, the last evaluation before offline RL (0 if none): what `run_study` records as its
+    pre-training end (for BC, whose whole run is actor pre-training, the last evaluation)."""
+    ends: dict[str, int] = {}
+    for r in rows:
+        ends.setdefault(r["variant"], 0)
+        if r.get("phase", "offline_rl") != "offline_rl":
+            ends[r["variant"]] = max(ends[r["variant"]], r["update"])
+    return ends
+
+
+def merge_runs(run_dirs: list[Path], out_dir: Path) -> list[dict]:
+    """One study from runs of it that each trained some of its variants (say one process per variant on a GPU):
+    their variants and curves side by side in `out_dir` (config.json, curves.csv, summary.json, curves.png),
+    re-summarised, so that the from-scratch asymptote and the updates to 90 % of it reach every variant.  The runs
+    must agree on everything but their variants (and checkpoint interval); `out_dir` must not hold a run yet."""
+    if (out_dir / "config.json").exists():
+        raise FileExistsError(f"{out_dir} already holds a run; merge into a new directory")
+    studies = []
+    for d in run_dirs:
+        if not (d / "config.json").exists() or not (d / "curves.csv").exists():
+            raise FileNotFoundError(f"{d}: not a run directory (config.json and curves.csv expected)")
+        studies.append(Study.from_json((d / "config.json").read_text()))
+    own = ("variants", "reference", "checkpoint_every")
+    shared = [{k: v for k, v in dataclasses.asdict(s).items() if k not in own} for s in studies]
+    for d, fields in zip(run_dirs[1:], shared[1:]):
+        if differ := [k for k in fields if fields[k] != shared[0][k]]:
+            raise ValueError(f"{d} is not the same study as {run_dirs[0]}: {', '.join(differ)} differ")
+    variants = tuple(v for s in studies for v in s.variants)
+    # a run without the from-scratch variant names no reference; the one that trained it does
+    references = sorted({s.reference for s in studies if s.reference is not None})
+    if len(references) > 1:
+        raise ValueError(f"the runs name different reference variants: {', '.join(references)}")
+    reference = references[0] if references else None
+    study = dataclasses.replace(studies[0], variants=variants, reference=reference)  # checks labels are unique
+    rows = [r for d in run_dirs for r in read_curves(d / "curves.csv")]
+    ends = pretrain_ends_of(rows)
+    summary = summarize(study, rows, ends)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(out_dir / "config.json", study.to_json())
+    write_curves(out_dir / "curves.csv", rows)
+    atomic_write_text(out_dir / "summary.json", summary_json(summary))
+    plot_curves(out_dir / "curves.png", study, rows, ends)
+    return summary
+
+
 T95 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306, 9: 2.262, 10: 2.228}
 
 

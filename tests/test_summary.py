@@ -144,3 +144,53 @@ def test_summary_json_writes_null_for_nan():
     text = summary_json([{"asymptote": float("nan"), "final_score_mean": 3.0, "overrides": {"x": float("inf")}}])
     assert json.loads(text) == [{"asymptote": None, "final_score_mean": 3.0, "overrides": {"x": None}}]
     assert "NaN" not in text and "Infinity" not in text
+
+
+def _run_dir(path, study, rows):
+    from offrl_jax.runner import write_curves
+
+    path.mkdir()
+    (path / "config.json").write_text(study.to_json())
+    write_curves(path / "curves.csv", rows)
+    return path
+
+
+def test_merge_runs_resummarises_variants_trained_apart(tmp_path, capsys):
+    import json
+
+    from experiments import report
+    from offrl_jax.runner import read_curves
+
+    common = dict(name="t", dataset="hopper-medium", env="hopper", seeds=(0, 1), updates=4000, eval_every=1000)
+    pre = Study(variants=(Variant.of("pretrained", "td3bc", pretrain_updates=2000),), **common)
+    scratch = Study(variants=(Variant.of("scratch", "td3bc", pretrain="none"),), reference="scratch", **common)
+    phases = ["actor_pretrain", "critic_pretrain", "offline_rl", "offline_rl"]
+    pre_rows = [r | {"phase": phases[r["update"] // 1000 - 1], "bc_mse": 0.5}
+                for r in rows_of("pretrained", [[50, 70, 90, 95], [50, 70, 80, 85]])]
+    scratch_rows = [r | {"phase": "offline_rl"} for r in rows_of("scratch", [[10, 40, 80, 100], [10, 40, 60, 80]])]
+    a = _run_dir(tmp_path / "a", pre, pre_rows)
+    b = _run_dir(tmp_path / "b", scratch, scratch_rows)
+    assert report.main(["--merge", str(tmp_path / "ab"), str(a), str(b)]) == 0
+    assert "| pretrained | 90.0 ± " in capsys.readouterr().out
+    summary = {s["variant"]: s for s in json.loads((tmp_path / "ab" / "summary.json").read_text())}
+    # the scratch run's final (mean of 100 and 80) is now the pretrained variant's asymptote too; 90 % of 90 = 81,
+    # reached by the pretrained seed-mean (85) at 3000 updates and by scratch (90) at 4000
+    assert summary["pretrained"]["asymptote"] == 90 and summary["pretrained"]["updates_to_90pct"] == 3000
+    assert summary["scratch"]["updates_to_90pct"] == 4000
+    # pre-training ends at the last evaluation before offline RL
+    assert summary["pretrained"]["pretrain_updates"] == 2000 and summary["scratch"]["pretrain_updates"] == 0
+    merged = Study.from_json((tmp_path / "ab" / "config.json").read_text())
+    assert [v.label for v in merged.variants] == ["pretrained", "scratch"] and merged.reference == "scratch"
+    rows = read_curves(tmp_path / "ab" / "curves.csv")
+    assert len(rows) == 16 and rows[0]["bc_mse"] == 0.5 and "bc_mse" not in rows[-1] and rows[-1]["seed"] == 1
+    # nothing is overwritten, and runs of different studies do not merge
+    before = (tmp_path / "ab" / "summary.json").read_text()
+    assert report.main(["--merge", str(tmp_path / "ab"), str(a), str(b)]) == 2
+    assert "already holds a run" in capsys.readouterr().err
+    assert (tmp_path / "ab" / "summary.json").read_text() == before
+    other = _run_dir(tmp_path / "c", Study(variants=scratch.variants, reference="scratch",
+                                           **(common | {"dataset": "hopper-medium-replay"})), scratch_rows)
+    assert report.main(["--merge", str(tmp_path / "ac"), str(a), str(other)]) == 2
+    assert "dataset differ" in capsys.readouterr().err and not (tmp_path / "ac").exists()
+    assert report.main(["--merge", str(tmp_path / "bb"), str(b), str(b)]) == 2  # the same variant twice
+    assert "unique labels" in capsys.readouterr().err
