@@ -1,4 +1,6 @@
 # session 7, device call 1: set up, start every job in its own process session, then poll
+# (a record of what ran on the GPU machine: .xfer/setup.sh pip-installed the carried py3.12 wheels -- mujoco,
+# gymnasium, gymnasium-robotics, minari -- and .xfer/g7_poll.sh waited for the jobs and packed runs/g7 into $OUT)
 source .xfer/setup.sh
 export XLA_PYTHON_CLIENT_PREALLOCATE=false OFFRL_JAX_CACHE=/tmp/offrl_cache
 PY=${PY:-python3}
