@@ -168,3 +168,14 @@ def test_commands_writing_into_out_refuse_an_earlier_one(module, tmp_path, capsy
         importlib.import_module(f"experiments.{module}").main(["--out", str(tmp_path)])
     assert e.value.code == 2 and "exists and is not empty; pass --overwrite" in capsys.readouterr().err
     assert (tmp_path / "summary.json").read_text() == "earlier"
+
+
+def test_random_scores_report_the_installed_reward_too():
+    import numpy as np
+
+    from experiments.adroit_random_scores import random_returns
+
+    door, door_installed = random_returns("door", 2, seed=0)
+    assert door.shape == door_installed.shape == (2,) and not np.allclose(door, door_installed)
+    pen, pen_installed = random_returns("pen", 2, seed=0)  # pen's reward was not changed
+    np.testing.assert_array_equal(pen, pen_installed)
