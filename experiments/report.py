@@ -14,14 +14,13 @@ process per variant on a GPU) into OUT, re-summarised across them (`offrl_jax.ru
 """
 from __future__ import annotations
 
-import csv
 import json
 import sys
 from collections import defaultdict
 from pathlib import Path
 
 from experiments.common import OneLineParser
-from offrl_jax.runner import merge_runs, summary_table as table
+from offrl_jax.runner import merge_runs, read_curves, summary_table as table
 
 
 def summaries(path: Path) -> list[Path]:
@@ -36,10 +35,9 @@ def summaries(path: Path) -> list[Path]:
 def curve_table(curves: Path) -> str:
     """Seed-mean score per variant (rows) at every evaluation (columns) of a curves.csv."""
     scores: dict[str, dict[int, list[float]]] = defaultdict(lambda: defaultdict(list))
-    with open(curves) as f:
-        for row in csv.DictReader(f):
-            if row["score"]:
-                scores[row["variant"]][int(row["update"])].append(float(row["score"]))
+    for row in read_curves(curves):
+        if "score" in row:  # read_curves leaves empty cells out
+            scores[row["variant"]][row["update"]].append(row["score"])
     updates = sorted({u for per in scores.values() for u in per})
     label = lambda u: f"{u / 1000:g}k" if u >= 1000 else str(u)  # noqa: E731
     lines = ["| updates | " + " | ".join(label(u) for u in updates) + " |", "|---" * (len(updates) + 1) + "|"]
