@@ -6,7 +6,8 @@ The paper's protocol: 300k updates (200k of pre-training for the pre-trained hyb
 mean of the evaluations between 200k and 300k updates (both ends included: 11 evaluations, the first at the end
 of pre-training), over 4 seeds (mean +- std).  `--scale` shrinks every update count by the same factor for a CPU
 (default 0.1: 30k updates, 20k pre-training, window 20k-30k, evaluation every 1k); `--scale 1` is the paper's
-protocol.  EDAC(+BC) uses the paper's 50 critics and eta 200 unless told otherwise.
+protocol.  EDAC(+BC) uses the paper's 50 critics and eta 200 unless told otherwise.  TD3+BC's alpha is the
+paper's 0.1 (Table 3) under any preset; the authors' door config has 1.0 (`--alpha 1`).
 
     python -m experiments.adroit_door [--dataset door-human] [--variants BC "pre-trained TD3+BC+CQL"] [--scale 1]
         [--seeds 4]
@@ -15,6 +16,7 @@ import argparse
 import sys
 
 from experiments.common import OneLineParser, main_guard, positive_int, run_args, study_fields
+from offrl_jax.algos import PRESETS, preset_values
 from offrl_jax.runner import Study, Variant
 
 # label -> (algorithm, pre-training)
@@ -39,21 +41,35 @@ def build(args) -> Study:
         kw = {} if mode is None else {"pretrain": mode} | ({"pretrain_updates": pretrain} if mode != "none" else {})
         if algo.startswith("edac") and args.num_critics:
             kw["num_critics"] = args.num_critics
-        variants.append(Variant.of(label, algo, **kw))
+        if args.alpha is not None and algo in ("td3bc", "td3bc_cql"):
+            kw["alpha"] = args.alpha
+        if args.balance is not None and algo in ("td3bc_cql", "edac_bc"):
+            kw["balance"] = args.balance
+        variants.append(Variant.of(label, algo, **(preset_values(args.preset, algo) | kw)))
     fields = study_fields(args) | {"updates": updates, "eval_every": every}
     return Study(name=f"adroit-{args.dataset}", dataset=args.dataset_path or args.dataset, env="door",
                  variants=tuple(variants), final_window=(pretrain, updates), **fields)
 
 
-def main(argv=None) -> int:
+def make_parser() -> argparse.ArgumentParser:
     p = OneLineParser(prog="experiments.adroit_door", description=__doc__,
                       formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--dataset", choices=("door-human", "door-cloned"), default="door-human")
     p.add_argument("--variants", nargs="+", choices=tuple(VARIANTS), default=list(VARIANTS))
     p.add_argument("--scale", type=float, default=0.1, help="fraction of the paper's update counts (default 0.1)")
     p.add_argument("--num-critics", type=positive_int, default=None, help="EDAC(+BC) ensemble size (paper: 50)")
+    p.add_argument("--alpha", type=float, default=None,
+                   help="TD3+BC(+CQL) alpha (default: the paper's 0.1; the authors' door config: 1.0)")
+    p.add_argument("--balance", choices=("abs", "signed"), default=None,
+                   help="the hybrids' loss balancing: x/sg|x| (abs, default) or the authors' x/sg(x) (signed)")
+    p.add_argument("--preset", choices=tuple(PRESETS), default=None,
+                   help="authors: the authors' code switch by switch (docs/fidelity.md)")
     run_args(p, updates=None, eval_every=None, seeds=4)  # --scale sets both
-    return main_guard(build, p, argv)
+    return p
+
+
+def main(argv=None) -> int:
+    return main_guard(build, make_parser(), argv)
 
 
 if __name__ == "__main__":

@@ -3,9 +3,13 @@
 Default (no arguments): hopper-medium (regenerated from the shipped behaviour policy and cached), TD3+BC with
 actor+critic pre-training (10k updates) vs from scratch, 3 vmapped seeds, 60k updates each (pre-training included),
 evaluated every 5k updates (10 episodes, deterministic policy, D4RL-normalised); the two variants train at once
-(`--parallel 2`).  See RESULTS.md for the measured wall-clock time and for what happens with longer budgets.
+(`--parallel 2`).  TD3+BC's alpha is 2.5 here (TD3+BC's published default, with which the from-scratch baseline
+learns on this data); the paper's per-env alphas (hopper 10) come with `--preset authors` or `--alpha 10`.
+See RESULTS.md for the measured wall-clock time and for what happens with longer budgets.
 
     python -m experiments.mujoco_medium
+    python -m experiments.mujoco_medium --alpha 2.5 10                                   # both alphas, one program
+    python -m experiments.mujoco_medium --preset authors                                 # the authors' code's setup
     python -m experiments.mujoco_medium --env walker2d --algo edac --updates 50000
     python -m experiments.mujoco_medium --pretrain actor critic actor+critic none      # Appendix C ablation
     python -m experiments.mujoco_medium --preset paper                                   # 3 envs x TD3+BC/EDAC, 1M
@@ -16,8 +20,9 @@ import argparse
 import sys
 
 from experiments.common import OneLineParser, UsageError, main_guard, positive_int, run_args, study_fields
-from offrl_jax.algos import ALGOS
+from offrl_jax.algos import ALGOS, PRESETS, preset_values
 from offrl_jax.algos.edac import EDACConfig
+from offrl_jax.algos.td3bc import TD3BCConfig
 from offrl_jax.runner import Study, Variant
 
 ENVS = ("hopper", "halfcheetah", "walker2d")
@@ -45,8 +50,10 @@ def parser(prog: str = "experiments.mujoco_medium", doc: str = __doc__, updates:
     add("--algo", choices=tuple(ALGOS), default="td3bc", help="(default %(default)s)")
     add("--pretrain", nargs="+", choices=PRETRAIN, default=["actor+critic", "none"],
         help="pre-training modes to compare, one variant each (default: actor+critic none)")
-    add("--pretrain-updates", type=positive_int, default=None,
-        help=f"default: 10k TD3+BC, {edac['pretrain_updates'] // 1000}k EDAC")
+    add("--pretrain-updates", type=pretrain_budget, default=None,
+        help=f"N, or auto[:CAP] to end each pre-training phase when its supervised losses improve by less than 1 %% "
+             f"per 1k updates (every seed; capped at CAP or the default; the rest goes to offline RL).  Default: "
+             f"10k TD3+BC, {edac['pretrain_updates'] // 1000}k EDAC")
     add("--lam", type=float, default=None, help="TD weight in critic pre-training (paper: 0 or 0.1)")
     add("--lambda-mode", choices=("loss", "target"), default=None)
     add("--actor-ln", action=argparse.BooleanOptionalAction, default=None, help="LayerNorm in the actor")
@@ -54,7 +61,8 @@ def parser(prog: str = "experiments.mujoco_medium", doc: str = __doc__, updates:
     add("--ln-affine", action=argparse.BooleanOptionalAction, default=None,
         help="learned LayerNorm scale/bias (default on; --no-ln-affine = the authors' code, faster)")
     add("--alpha", type=float, nargs="+", default=None,
-        help="TD3+BC alpha (default: per env); several values = a sweep, vmapped in one program")
+        help="TD3+BC alpha (default: 2.5 in the main job without a preset, else per env: hopper 10, halfcheetah "
+             "20, walker2d 5); several values = a sweep, vmapped in one program")
     add("--num-critics", type=positive_int, default=None, help=f"EDAC/SAC-N ensemble size (default: {num_critics})")
     add("--eta", type=float, nargs="+", default=None,
         help="EDAC diversity weight; several values = a sweep, vmapped in one program")
@@ -63,41 +71,64 @@ def parser(prog: str = "experiments.mujoco_medium", doc: str = __doc__, updates:
              f"(default {edac['actor_pretrain_fraction']})")
     add("--hidden", type=positive_int, nargs="+", default=None,
         help="hidden layer widths (default per algo)")
+    add("--timeouts", choices=("bootstrap", "stop", "drop"), default=None,
+        help="TD target at a time-out: bootstrap (default), stop (the authors'), drop the row (CORL's loader)")
     add("--actor-lr", type=float, default=None)
     add("--critic-lr", type=float, default=None)
+    help_authors = ("authors: the authors' code switch by switch (LayerNorm without scale/bias and eps 1e-5, "
+                    "PyTorch init, a 3x256 TD3+BC actor, no bootstrap at time-outs, x/sg(x) loss balancing, the "
+                    "paper's per-env alphas; docs/fidelity.md); flags given with it override single values")
     if preset:
-        add("--preset", choices=("paper",), default=None,
+        add("--preset", nargs="+", choices=("paper", *PRESETS), default=None,
             help="paper: 3 envs x {td3bc, edac} medium x 3 seeds x 1M updates (evaluation every 10k), "
                  "each in its own sub-directory; --env/--algo/--level/--updates/--eval-every other than their "
-                 "defaults are refused")
+                 "defaults are refused.  " + help_authors + ".  Both may be given")
+    else:
+        add("--preset", nargs=1, choices=tuple(PRESETS), default=None, help=help_authors)
     run_args(p, updates=updates, eval_every=eval_every)
     return p
+
+
+def pretrain_budget(text: str) -> dict:
+    """--pretrain-updates: "N" -> {pretrain_updates: N}; "auto" or "auto:CAP" -> self-ending pre-training."""
+    if text == "auto" or text.startswith("auto:"):
+        cap = positive_int(text[5:]) if text.startswith("auto:") else None
+        return {"pretrain_auto": True} | ({"pretrain_updates": cap} if cap else {})
+    return {"pretrain_updates": positive_int(text)}
 
 
 # flag destination -> config field
 OVERRIDES = {"lam": "lam", "lambda_mode": "lambda_mode", "actor_ln": "actor_layer_norm",
              "critic_ln": "critic_layer_norm", "alpha": "alpha", "num_critics": "num_critics", "eta": "eta",
-             "pretrain_updates": "pretrain_updates", "actor_lr": "actor_lr", "critic_lr": "critic_lr",
-             "hidden": "hidden", "actor_pretrain_fraction": "actor_pretrain_fraction", "ln_affine": "layer_norm_affine"}
+             "actor_lr": "actor_lr", "critic_lr": "critic_lr",
+             "hidden": "hidden", "actor_pretrain_fraction": "actor_pretrain_fraction", "ln_affine": "layer_norm_affine",
+             "timeouts": "timeouts"}
 
 
 def overrides(args) -> dict:
     """Config overrides from the flags (None: not given; a study's omitted flags are None)."""
     values = {field: getattr(args, dest, None) for dest, field in OVERRIDES.items()}
-    return values | {"hidden": tuple(values["hidden"]) if values["hidden"] else None}
+    return values | {"hidden": tuple(values["hidden"]) if values["hidden"] else None} | (
+        getattr(args, "pretrain_updates", None) or {})
 
 
 PRESET_FIXED = ("env", "algo", "level", "updates", "eval_every")  # what --preset paper sets itself
 
 
+MAIN_JOB_ALPHA = 2.5  # the main job's TD3+BC alpha unless --alpha or a preset is given (see the module doc)
+
+
 def build(args) -> Study | list[Study]:
-    if args.preset == "paper":
+    presets = args.preset or []
+    if "paper" in presets:
         defaults = make_parser()
         changed = [f"--{d.replace('_', '-')}" for d in PRESET_FIXED if getattr(args, d) != defaults.get_default(d)]
         if changed:
             raise UsageError(f"--preset paper sets {', '.join(changed)} itself; leave them out")
         return [make_study(env, algo, "medium", args, dict(updates=1_000_000, eval_every=10_000))
                 for env in ENVS for algo in ("td3bc", "edac")]
+    if args.alpha is None and not presets and ALGOS[args.algo][0] is TD3BCConfig:
+        args.alpha = [MAIN_JOB_ALPHA]
     return make_study(args.env, args.algo, args.level, args)
 
 
@@ -108,12 +139,21 @@ def given(args) -> dict:
     """The hyper-parameters set on the command line (the rest take the per-env defaults); a swept flag given one
     value is that value, given several it stays a list (see `sweep_variants`)."""
     values = {k: v for k, v in overrides(args).items() if v is not None}
-    return {k: (v[0] if k in SWEPT and len(v) == 1 else v) for k, v in values.items()}
+    values = {k: (v[0] if k in SWEPT and len(v) == 1 else v) for k, v in values.items()}
+    config_presets = [p for p in getattr(args, "preset", None) or [] if p in PRESETS]
+    return values | ({"preset": config_presets[0]} if config_presets else {})
 
 
 def sweep_variants(label: str, algo: str, fixed: dict) -> tuple[Variant, ...]:
     """One variant, or one per value of a swept flag (labels "pretrained alpha=2.5", ...); the runner trains a
-    sweep's variants as one vmapped program."""
+    sweep's variants as one vmapped program.  A "preset" entry of `fixed` is expanded into its values for `algo`
+    (every value is then recorded in the variant), under the other entries."""
+    fixed = dict(fixed)
+    fixed = preset_values(fixed.pop("preset", None), algo) | fixed
+    return _sweep_variants(label, algo, fixed)
+
+
+def _sweep_variants(label: str, algo: str, fixed: dict) -> tuple[Variant, ...]:
     swept = [k for k in SWEPT if isinstance(fixed.get(k), list)]
     if not swept:
         return (Variant.of(label, algo, **fixed),)

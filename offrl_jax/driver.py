@@ -57,6 +57,9 @@ def check_call_grid(phases: list[Phase], chunk_updates: int) -> None:
     k; otherwise chunks would drift off the evaluation grid.  Raises ValueError naming the numbers."""
     start = 0
     for p in phases:
+        if p.auto_stop is not None and chunk_updates % p.auto_stop.window:
+            raise ValueError(f"phase '{p.name}' ends itself, checked every {p.auto_stop.window} updates, so the "
+                             f"evaluation interval ({chunk_updates}) must be a multiple of that window")
         k = p.updates_per_call
         if k > 1 and (start % k or p.steps % k or chunk_updates % k):
             raise ValueError(f"phase '{p.name}' makes {k} updates per call, so its start ({start}), its length "
@@ -74,11 +77,13 @@ def make_chunk_fn(phase: Phase, batch_size: int, num_calls: int,
 
     def one_seed(state, data, key, hparams):
         member_phase = phase if phase_for is None else phase_for(hparams)
-        n = data["rewards"].shape[0]
+        rows = data.get("rows")  # the rows that may be sampled, when some are excluded (timeouts="drop")
+        n = data["rewards"].shape[0] if rows is None else rows.shape[0]
 
         def body(state, key):
             k_idx, k_update = jax.random.split(key)
             idx = jax.random.randint(k_idx, (member_phase.updates_per_call, batch_size), 0, n)
+            idx = idx if rows is None else rows[idx]
             batch = {k: data[k][idx] for k in DATA_FIELDS} | {"idx": idx}
             return member_phase.update(state, batch, k_update)
 
@@ -119,6 +124,7 @@ class Chunk:
     metrics: dict[str, np.ndarray]  # each (M,)
     seconds: float  # wall-clock seconds of training so far (compilation included, evaluation excluded)
     updates_per_s: float
+    ended: bool = False  # this chunk ended a self-ending (auto_stop) phase before its cap
 
 
 def seed_sharding(num_seeds: int, devices=None) -> tuple[NamedSharding, NamedSharding]:
@@ -146,6 +152,8 @@ class Driver:
         values = tuple(sweep[1]) if sweep else (None,)
         self.members = tuple(s for _ in values for s in self.seeds)  # value-major: member j * S + i
         self.seed_axis, self.replicated = seed_sharding(len(self.members), devices)
+        if getattr(algo.cfg, "timeouts", "bootstrap") == "drop":  # CORL's loader: time-out rows are never sampled
+            data = data | {"rows": jnp.asarray(np.flatnonzero(np.asarray(data["timeouts"]) == 0), jnp.int32)}
         self.data = jax.device_put(data, self.replicated)  # one copy per device, shared by its seeds
         self.hparams = None
         if sweep:
@@ -174,17 +182,26 @@ class Driver:
         return self._chunk_fns[key]
 
     def run(self, phases: list[Phase], chunk_updates: int, states: Any = None, start_update: int = 0,
-            seconds: float = 0.0) -> Iterator[Chunk]:
+            seconds: float = 0.0, ended: dict[str, int] | None = None,
+            last_metrics: dict[str, np.ndarray] | None = None) -> Iterator[Chunk]:
         """Run `phases` in order, yielding after every `chunk_updates` updates and at every phase end.
 
-        `states`/`start_update`/`seconds` resume a run from a checkpoint taken at a chunk boundary.
+        `states`/`start_update`/`seconds` resume a run from a checkpoint taken at a chunk boundary.  A phase with
+        `auto_stop` runs in windows of `auto_stop.window` updates and may end before its cap (the chunk that ends
+        it has `ended=True`; the updates it did not use go to the last phase).  To resume such a run, `ended`
+        gives the end update of every self-ended phase, and `last_metrics` the metrics of the window before
+        `start_update` (what the last yielded chunk had), so the stopping rule sees what it would have seen.
         """
+        phases = list(phases)
+        for name, end in (ended or {}).items():
+            _end_phase(phases, [p.name for p in phases].index(name), end)
         check_call_grid(phases, chunk_updates)
         states = self.init() if states is None else self.shard(states)
         total = sum(p.steps for p in phases)
         extra = () if self.hparams is None else (self.hparams,)
         phase_start = 0
-        for index, phase in enumerate(phases):
+        for index in range(len(phases)):
+            phase = phases[index]
             phase_end = phase_start + phase.steps
             if start_update >= phase_end:
                 phase_start = phase_end
@@ -196,8 +213,12 @@ class Driver:
                 states = hook(states, self.data, jax.device_put(seed_keys(self.members, PHASE_START, index),
                                                                 self.seed_axis), *extra)
             update = max(start_update, phase_start)
+            auto = phase.auto_stop  # the metrics of the last whole window of this phase, if any
+            previous = last_metrics if auto is not None and update - phase_start >= auto.window else None
             while update < phase_end:
                 n = min(chunk_updates - update % chunk_updates, phase_end - update)  # align chunks globally
+                if auto is not None:  # and the stopping rule's windows (on the global grid, like the chunks)
+                    n = min(n, auto.window - update % auto.window)
                 calls = max(1, n // phase.updates_per_call)
                 tic = time.perf_counter()
                 keys = jax.device_put(seed_keys(self.members, CHUNK, update), self.seed_axis)
@@ -206,6 +227,26 @@ class Driver:
                 elapsed = time.perf_counter() - tic
                 seconds += elapsed
                 update += calls * phase.updates_per_call
-                yield Chunk(phase.name, update, states, metrics, seconds, calls * phase.updates_per_call / elapsed)
+                stop = False
+                if auto is not None and update % auto.window == 0 and calls * phase.updates_per_call == auto.window:
+                    stop = update < phase_end and auto.converged(previous, metrics)  # a whole window: compare
+                    previous = metrics
+                    if stop:
+                        _end_phase(phases, index, update)
+                        phase_end = update
+                if auto is None or update % chunk_updates == 0 or update == phase_end:
+                    yield Chunk(phase.name, update, states, metrics, seconds, calls * phase.updates_per_call / elapsed,
+                                ended=stop)
             phase_start = phase_end
             start_update = update
+
+
+def _end_phase(phases: list[Phase], index: int, end: int) -> None:
+    """End phase `index` at global update `end` (in place); the last phase gets the updates it leaves."""
+    start = sum(p.steps for p in phases[:index])
+    if not start <= end <= start + phases[index].steps:
+        raise ValueError(f"phase '{phases[index].name}' cannot end at update {end} (it runs from {start} to "
+                         f"{start + phases[index].steps})")
+    left = start + phases[index].steps - end
+    phases[index] = dataclasses.replace(phases[index], steps=end - start)
+    phases[-1] = dataclasses.replace(phases[-1], steps=phases[-1].steps + left)

@@ -83,23 +83,32 @@ def critic_regression_loss(q: jax.Array, target: jax.Array) -> jax.Array:
 # ------------------------------------------------------------------------------------------- loss normalisation
 
 
-def normalized(x: jax.Array, eps: float = 1e-8) -> jax.Array:
-    """x / sg(|x|): value +-1, gradient grad(x)/|x|, never sign-flipped (the authors' sg(x) flips it when x < 0)."""
+BALANCES = ("abs", "signed")  # x / sg|x| (ours), x / sg(x) (the authors' code)
+
+
+def normalized(x: jax.Array, form: str = "abs", eps: float = 1e-8) -> jax.Array:
+    """Unit-scale loss.  form "abs": x / (sg|x| + eps), value +-1, gradient grad(x)/|x|, never sign-flipped.
+    form "signed": x / sg(x), the authors' code: value 1 and gradient grad(x)/x, which points the other way when
+    x < 0 (a negative CQL penalty or SAC loss is then pushed back up, not further down).  () -> ()."""
+    if form == "signed":
+        return x / sg(x)
     return x / (sg(jnp.abs(x)) + eps)
 
 
-def balance_losses(primary: jax.Array, auxiliary: jax.Array, weight: float) -> jax.Array:
-    """Loss balancing of the hybrids (Appendix G.3): a / sg|a| + c * b / sg|b|.  (), () -> ()."""
-    return normalized(primary) + weight * normalized(auxiliary)
+def balance_losses(primary: jax.Array, auxiliary: jax.Array, weight: float, form: str = "abs") -> jax.Array:
+    """Loss balancing of the hybrids (Appendix G.3): a / sg|a| + c * b / sg|b| (`form` "signed": sg(a), sg(b)).
+    (), () -> ()."""
+    return normalized(primary, form) + weight * normalized(auxiliary, form)
 
 
-def mix_losses(mc_loss: jax.Array, td_loss: jax.Array, lam: float) -> jax.Array:
-    """The authors' lambda mixing on normalised losses: (1-lam) L_MC/sg|L_MC| + lam L_TD/sg|L_TD|.  (), () -> ()."""
-    return (1.0 - lam) * normalized(mc_loss) + lam * normalized(td_loss)
+def mix_losses(mc_loss: jax.Array, td_loss: jax.Array, lam: float, form: str = "abs") -> jax.Array:
+    """The authors' lambda mixing on normalised losses: (1-lam) L_MC/sg|L_MC| + lam L_TD/sg|L_TD|.  (), () -> ().
+    Both losses are squared errors (>= 0), so `form` changes nothing but the epsilon."""
+    return (1.0 - lam) * normalized(mc_loss, form) + lam * normalized(td_loss, form)
 
 
 def pretrain_critic_loss(q: jax.Array, mc_return: jax.Array, td_fn: Callable[[], jax.Array], lam: float,
-                         mode: str = "loss", per_critic: str = "sum") -> jax.Array:
+                         mode: str = "loss", per_critic: str = "sum", form: str = "abs") -> jax.Array:
     """Critic pre-training on Monte-Carlo returns, with a share lam of TD (eq. 5).  q: (N, B), mc_return: (B,) -> ().
 
     lam = 0: the MC error alone (`td_fn` is not called).  mode "target": regression on (1 - lam) R + lam y;
@@ -112,18 +121,20 @@ def pretrain_critic_loss(q: jax.Array, mc_return: jax.Array, td_fn: Callable[[],
         return scale * mc_critic_loss(q, mc_return)
     if mode == "target":
         return scale * critic_regression_loss(q, mix_targets(mc_return, td_fn(), lam))
-    return mix_losses(mc_critic_loss(q, mc_return), critic_regression_loss(q, td_fn()), lam)
+    return mix_losses(mc_critic_loss(q, mc_return), critic_regression_loss(q, td_fn()), lam, form)
 
 
 # ---------------------------------------------------------------------------------------------------- actor losses
 
 
-def td3bc_actor_loss(q: jax.Array, pred_actions: jax.Array, actions: jax.Array, alpha: float) -> jax.Array:
-    """TD3+BC actor: -lmbda mean Q(s, pi(s)) + MSE(pi(s), a), lmbda = alpha / sg(mean |Q|).
+def td3bc_actor_loss(q: jax.Array, pred_actions: jax.Array, actions: jax.Array, alpha: float,
+                     q_scale_eps: float = 1e-8) -> jax.Array:
+    """TD3+BC actor: -lmbda mean Q(s, pi(s)) + MSE(pi(s), a), lmbda = alpha / (sg(mean |Q|) + q_scale_eps).
 
-    q: (B,) (the first critic's value of the policy action), pred_actions, actions: (B, A) -> ().
+    q: (B,) (the first critic's value of the policy action), pred_actions, actions: (B, A) -> ().  CORL and the
+    authors divide by mean|Q| alone (q_scale_eps = 0).
     """
-    lmbda = alpha / (sg(jnp.mean(jnp.abs(q))) + 1e-8)
+    lmbda = alpha / (sg(jnp.mean(jnp.abs(q))) + q_scale_eps)
     return -lmbda * jnp.mean(q) + bc_loss(pred_actions, actions)
 
 

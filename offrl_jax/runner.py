@@ -217,18 +217,21 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
     def record():
         recorder.set({label: [r for r in rows if r["variant"] == label] for label in labels})
 
+    member_names = [(v, seed) for v in group for seed in seeds]  # member j * S + i = (variant j, seed i)
+    ended, last_metrics = {}, None  # self-ended pre-training phases, for a resumed run
     if resume and ckpt_path.exists():
         states, start, seconds, rows = load_checkpoint(ckpt_path, driver.init())
+        ended = {r["phase"]: r["update"] for r in rows if r.get("phase_ended")}
+        last_metrics = _metrics_at(rows, member_names, start)
         record()
     bar.update(start * len(group))
     if start >= last_update:
         return pretrain_end
     every = study.checkpoint_every or study.eval_every
     last_saved = start
-    member_names = [(v, seed) for v in group for seed in seeds]  # member j * S + i = (variant j, seed i)
     last_score = {(r["variant"], r["seed"]): r["score"] for r in rows}  # resumed: a seed that had diverged stays out
     alive = np.array([math.isfinite(last_score.get((v.label, seed), 0.0)) for v, seed in member_names])
-    for chunk in driver.run(phases, study.eval_every, states, start, seconds):
+    for chunk in driver.run(phases, study.eval_every, states, start, seconds, ended, last_metrics):
         if recorder.stop.is_set():
             raise Stopped(f"{name} stopped at update {start}; last checkpoint: update {last_saved}")
         finite = np.asarray(chunk.metrics.pop("finite"), bool)
@@ -247,6 +250,9 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
         scores = evaluate_normalized(policy, chunk.states, study.env, study.eval_episodes).mean(axis=1)
         scores[~alive] = np.nan
         rows += _rows(member_names, chunk, scores)
+        if chunk.ended:  # a pre-training phase ended itself here: the hand-over, recorded for the summary and resume
+            for row in rows[-len(member_names):]:
+                row["phase_ended"] = 1
         bar.update((chunk.update - start) * len(group))
         start = chunk.update
         mean_score = float(np.nanmean(scores)) if alive.any() else float("nan")
@@ -257,7 +263,22 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
             save_checkpoint(ckpt_path, chunk.states, chunk.update, chunk.seconds, rows)
             last_saved = chunk.update
         record()
+    if any(p.auto_stop for p in phases):  # where pre-training actually ended
+        return max(pretrain_ends_of(rows).values(), default=pretrain_end)
     return pretrain_end
+
+
+def _metrics_at(rows: list[dict], members: list[tuple[Variant, int]], update: int) -> dict[str, np.ndarray] | None:
+    """Every metric of the rows at `update`, one value per member (None if a member has no row there)."""
+    at = {(r["variant"], r["seed"]): r for r in rows if r["update"] == update}
+    if any((v.label, seed) not in at for v, seed in members):
+        return None
+    fixed = {"variant", "algo", "seed", "phase", "update", "seconds", "score", "phase_ended"}
+    names = [k for k in at[(members[0][0].label, members[0][1])] if k not in fixed]
+    try:
+        return {k: np.array([at[(v.label, seed)][k] for v, seed in members]) for k in names}
+    except KeyError:
+        return None
 
 
 def _rows(members: list[tuple[Variant, int]], chunk, scores: np.ndarray) -> list[dict]:
@@ -409,6 +430,8 @@ def _summarize(study: Study, rows: list[dict], pretrain_ends: dict[str, int]) ->
         threshold = asymptote - 0.1 * abs(asymptote)  # 90 % of a positive asymptote; below a negative one too
         reached = np.flatnonzero(np.nanmean(scores, axis=0) >= threshold) if len(updates) else []
         config = make_config(v.algo, study.env, study.dataset, **dict(v.overrides))
+        mean_curve = np.nanmean(scores, axis=0) if len(updates) else np.array([np.nan])
+        peak = int(np.nanargmax(mean_curve)) if np.isfinite(mean_curve).any() else None
         summary.append({
             "variant": v.label, "env": study.env, "dataset": study.dataset, "algo": v.algo,
             "pretrain": getattr(config, "pretrain", "none"), "seeds": list(study.seeds), "updates": study.updates,
@@ -422,6 +445,12 @@ def _summarize(study: Study, rows: list[dict], pretrain_ends: dict[str, int]) ->
             # training wall-clock of the program that trained this variant: in a vmapped sweep, the whole group's
             "seconds_to_90pct": float(seconds[reached[0]]) if len(reached) else None,
             "pretrain_updates": pretrain_ends.get(v.label, 0),
+            # the seed-mean curve's best evaluation, and how far the final score is below it (the paper's
+            # stability question: does a variant stay up?)
+            "peak_score_mean": float(mean_curve[peak]) if peak is not None else float("nan"),
+            "peak_update": int(updates[peak]) if peak is not None else None,
+            "fall_from_peak": float(mean_curve[peak] - np.nanmean(finals[v.label])) if peak is not None
+            else float("nan"),
             # seeds whose final score is not finite (diverged and stopped): the mean and CI above leave them out
             "seeds_diverged": [seed for seed, f in zip(study.seeds, finals[v.label]) if not np.isfinite(f)],
             "overrides": dict(v.overrides),

@@ -53,16 +53,16 @@ def test_gaussian_actor_log_std_clipped():
 def test_layer_norm_without_affine_has_no_scale_or_bias_and_normalises():
     """layer_norm_affine=False is the authors' nn.LayerNorm(elementwise_affine=False): no parameters, and the
     pre-activations of each row have mean 0 and variance 1 (flax eps 1e-6)."""
-    from offrl_jax.nets import MLP
+    from offrl_jax.nets import MLP, Arch
 
     x = jax.random.normal(jax.random.PRNGKey(0), (4, 3)) * 5.0 + 2.0
-    mlp = MLP((6,), 1, layer_norm=True, layer_norm_affine=False)
+    mlp = MLP((6,), 1, layer_norm=True, arch=Arch(layer_norm_affine=False))
     params = mlp.init(jax.random.PRNGKey(1), x)
     assert "LayerNorm_0" not in params["params"]  # nothing to learn
     h = x @ params["params"]["Dense_0"]["kernel"] + params["params"]["Dense_0"]["bias"]
     normed = (h - h.mean(-1, keepdims=True)) / jnp.sqrt(h.var(-1, keepdims=True) + 1e-6)
     want = jax.nn.relu(normed) @ params["params"]["Dense_1"]["kernel"] + params["params"]["Dense_1"]["bias"]
     np.testing.assert_allclose(mlp.apply(params, x), want, rtol=1e-5, atol=1e-6)
-    ens = CriticEnsemble(num=2, hidden=(8, 8), layer_norm_affine=False)
+    ens = CriticEnsemble(num=2, hidden=(8, 8), arch=Arch(layer_norm_affine=False))
     leaves = jax.tree.leaves(ens.init(jax.random.PRNGKey(2), x, jnp.ones((4, 2))))
     assert len(leaves) == 2 * 3  # kernel + bias of 3 Dense layers, stacked over members; no LayerNorm leaves

@@ -61,13 +61,18 @@ def test_preset_paper():
     (layernorm, ["--no-actor-ln"]),
     (replay, ["--level", "medium"]),  # --levels
     (figure2, ["--env", "walker2d"]),  # --envs
-    (figure2, ["--preset", "paper"]),
     (adroit_door, ["--updates", "5000"]),  # --scale
 ])
 def test_a_study_does_not_accept_a_flag_it_would_ignore(module, argv, capsys):
     with pytest.raises(SystemExit) as e:
         module.main(argv)
     assert e.value.code == 2 and capsys.readouterr().err.startswith("error: unrecognized arguments")
+
+
+def test_only_the_main_job_has_the_paper_preset(capsys):
+    with pytest.raises(SystemExit) as e:
+        figure2.main(["--preset", "paper"])
+    assert e.value.code == 2 and "invalid choice: 'paper'" in capsys.readouterr().err
 
 
 def test_preset_paper_refuses_the_flags_it_sets():

@@ -26,6 +26,19 @@ def test_summary_numbers_by_hand():
     # the reference still climbs: last 20 % (95) minus the 20 % before (75)
     assert summary["scratch"]["asymptote_trend"] == pytest.approx(20.0)
     assert summary["pretrained"]["pretrain_updates"] == 1000 and summary["scratch"]["pretrain"] == "none"
+    # peak of the seed-mean curve (95 and 85 -> 90 at 2000) ... pretrained: (95 + 85) / 2 = 90 at 2000, later 90s tie
+    # and the first is kept; the final (90) is 0 below it.  scratch peaks at its end.
+    assert summary["pretrained"]["peak_score_mean"] == 90 and summary["pretrained"]["peak_update"] == 2000
+    assert summary["pretrained"]["fall_from_peak"] == 0
+    assert summary["scratch"]["peak_update"] == 10_000 and summary["scratch"]["fall_from_peak"] == 0
+
+
+def test_fall_from_peak_by_hand():
+    study = Study(name="t", dataset="hopper-medium", env="hopper", seeds=(0, 1), updates=10_000, eval_every=1000,
+                  variants=(Variant.of("scratch", "td3bc", pretrain="none"),), reference="scratch")
+    curves = [[10, 90, 80, 70, 60, 50, 40, 40, 40, 40], [30, 70, 60, 50, 40, 30, 20, 20, 20, 20]]
+    (s,) = summarize(study, rows_of("scratch", curves), {})
+    assert s["peak_score_mean"] == 80 and s["peak_update"] == 2000 and s["fall_from_peak"] == 50  # final 30
 
 
 def test_report_renders_summary_and_rejects_missing_dir(tmp_path, capsys):

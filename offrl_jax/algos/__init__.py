@@ -30,6 +30,32 @@ ALGOS: dict[str, tuple[type, dict[str, Any]]] = {
 
 ADROIT = ("pen", "door", "hammer", "relocate")
 
+# Presets: named sets of config values, applied after the per-env defaults and before explicit overrides.
+# "authors": the authors' code (AdamJelley/EfficientOfflineRL, a CORL fork) switch by switch; docs/fidelity.md has
+# the table (what the paper says, what their code and CORL do, our default, the flag).
+_AUTHORS_COMMON = {"layer_norm_affine": False, "layer_norm_eps": 1e-5, "init": "torch", "balance": "signed",
+                   "timeouts": "stop"}
+PRESETS: dict[str, dict[str, dict[str, Any]]] = {
+    "authors": {
+        "td3bc": _AUTHORS_COMMON | {"actor_hidden": (256, 256, 256), "q_scale_eps": 0.0, "bc_target_updates": False},
+        "edac": _AUTHORS_COMMON | {"hidden_bias": 0.1, "tanh_log_det": "eps", "log_alpha_bound": 10.0},
+        # CORL's cql.py as the authors ran it: orthogonal init, log-std offset -1 within [-20, 2], temperature
+        # learning rate = policy learning rate, terminals only in the TD target, no EDAC-style output init
+        "cql": _AUTHORS_COMMON | {"init": "orthogonal", "out_init": False, "log_std_bounds": (-20.0, 2.0),
+                                  "log_std_offset": -1.0, "alpha_lr": 3e-5, "timeouts": "bootstrap"},
+    },
+}
+
+
+def preset_values(preset: str | None, algo: str) -> dict[str, Any]:
+    """The config values `preset` sets for `algo` ({} for no preset)."""
+    if preset is None:
+        return {}
+    if preset not in PRESETS:
+        raise ValueError(f"unknown preset '{preset}'; valid: {', '.join(PRESETS)}")
+    family = "cql" if algo == "cql" else ("td3bc" if ALGOS[algo][0] is TD3BCConfig else "edac")
+    return dict(PRESETS[preset][family])
+
 
 def env_defaults(algo: str, env: str, dataset: str = "") -> dict[str, Any]:
     """The paper's / authors' per-env hyper-parameters (Section 5, Appendix G Table 3)."""
@@ -55,13 +81,14 @@ def env_defaults(algo: str, env: str, dataset: str = "") -> dict[str, Any]:
     return d
 
 
-def make_config(algo: str, env: str = "", dataset: str = "", **overrides: Any):
-    """Config for `algo` with registry settings, then per-env defaults, then `overrides` (None values ignored)."""
+def make_config(algo: str, env: str = "", dataset: str = "", preset: str | None = None, **overrides: Any):
+    """Config for `algo` with registry settings, then per-env defaults, then `preset`'s values, then `overrides`
+    (None values ignored)."""
     if algo not in ALGOS:
         raise ValueError(f"unknown algorithm '{algo}'; valid: {', '.join(ALGOS)}")
     config_cls, fixed = ALGOS[algo]
     fields = {f.name for f in dataclasses.fields(config_cls)}
-    values = fixed | env_defaults(algo, env, dataset)
+    values = fixed | env_defaults(algo, env, dataset) | preset_values(preset, algo)
     for key, value in overrides.items():
         if value is None:
             continue
@@ -78,5 +105,5 @@ def make_algorithm(config, obs_dim: int, act_dim: int, num_transitions: int):
     return EDAC(config, obs_dim, act_dim, num_transitions)
 
 
-__all__ = ["ALGOS", "EDAC", "EDACConfig", "Phase", "TD3BC", "TD3BCConfig", "env_defaults", "make_algorithm",
-           "make_config"]
+__all__ = ["ALGOS", "EDAC", "EDACConfig", "PRESETS", "Phase", "TD3BC", "TD3BCConfig", "env_defaults",
+           "make_algorithm", "make_config", "preset_values"]

@@ -24,13 +24,24 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import math
 from collections.abc import Callable
 from typing import Any
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 import optax
 from flax import struct
+
+from offrl_jax.losses import BALANCES
+from offrl_jax.nets import INITS, Arch
+
+# What a TD target does at a time-out (the time limit cut the episode, the task did not end):
+#   "bootstrap"  r + gamma Q(s', a') as anywhere else (the state is not terminal)
+#   "stop"       r, as at a terminal (the authors' code: dones = terminals + timeouts)
+#   "drop"       the row is never sampled (CORL's loader drops it: its next observation is not recorded)
+TIMEOUTS = ("bootstrap", "stop", "drop")
 
 Params = Any
 Batch = dict[str, jax.Array]
@@ -69,6 +80,33 @@ class Phase:
     updates_per_call: int = 1
     # Called once (jitted, vmapped over seeds) before the phase starts: (state, data, key) -> state.
     on_start: Callable[[Any, Batch, jax.Array], Any] | None = None
+    # Pre-training that ends itself (`AutoStop`); `steps` is then its cap.
+    auto_stop: AutoStop | None = None
+
+
+@dataclasses.dataclass(frozen=True)
+class AutoStop:
+    """End a phase when its supervised losses stop improving (the paper: "pre-train until convergence ...
+    determined by monitoring the convex supervised loss functions").
+
+    Every `window` updates the driver takes each monitored metric's mean over that window, per member, and compares
+    it with the previous window's: the phase ends when, for every member and every metric, the relative
+    improvement (previous - current) / |previous| is below `tol`.  All members hand over together; the updates
+    left of the phase's cap go to the last phase (offline RL), so the total budget is unchanged.
+    """
+
+    monitor: tuple[str, ...]  # metric names, e.g. ("bc_loss", "mc_error")
+    window: int = 1_000
+    tol: float = 0.01
+
+    def converged(self, previous: dict[str, Any] | None, current: dict[str, Any]) -> bool:
+        if previous is None:
+            return False
+        for name in self.monitor:
+            prev, cur = np.asarray(previous[name], np.float64), np.asarray(current[name], np.float64)
+            if not np.all((prev - cur) < self.tol * np.abs(prev)):
+                return False
+        return True
 
 
 def with_hparams(algo: Any, **values: Any) -> Any:
@@ -119,6 +157,10 @@ def split_budget(total: int, pretrain: int) -> tuple[int, int]:
 
 def validate_common(cfg) -> None:
     """Reject invalid hyper-parameters with one line naming the field (shared by every config)."""
+    for field in dataclasses.fields(cfg):
+        value = getattr(cfg, field.name)
+        if isinstance(value, float) and not math.isfinite(value):
+            raise ValueError(f"{type(cfg).__name__}.{field.name} = {value!r} must be a finite number")
     checks = [
         ("gamma", 0.0 < cfg.gamma < 1.0, "must be in (0, 1) (a time-out's return tail is r / (1 - gamma))"),
         ("tau", 0.0 < cfg.tau <= 1.0, "must be in (0, 1]"),
@@ -126,15 +168,42 @@ def validate_common(cfg) -> None:
         ("actor_lr", cfg.actor_lr > 0, "must be positive"),
         ("critic_lr", cfg.critic_lr > 0, "must be positive"),
         ("pretrain_updates", cfg.pretrain_updates >= 0, "must be >= 0"),
+        ("pretrain_auto_window", cfg.pretrain_auto_window > 0, "must be positive"),
+        ("pretrain_auto_tol", cfg.pretrain_auto_tol >= 0, "must be >= 0"),
         ("hidden", len(cfg.hidden) > 0 and all(h > 0 for h in cfg.hidden), "must be positive layer widths"),
         ("pretrain", cfg.pretrain in ("none", "actor", "critic", "actor+critic"),
          "must be one of none, actor, critic, actor+critic"),
         ("lambda_mode", cfg.lambda_mode in ("loss", "target"), "must be 'loss' or 'target'"),
         ("num_critics", cfg.num_critics >= 1, "must be >= 1"),
+        ("actor_hidden", cfg.actor_hidden is None or (len(cfg.actor_hidden) > 0 and all(h > 0 for h in
+                                                                                        cfg.actor_hidden)),
+         "must be positive layer widths"),
+        ("layer_norm_eps", cfg.layer_norm_eps > 0, "must be positive"),
+        ("init", cfg.init in INITS, f"must be one of {', '.join(INITS)}"),
+        ("timeouts", cfg.timeouts in TIMEOUTS, f"must be one of {', '.join(TIMEOUTS)}"),
+        ("balance", cfg.balance in BALANCES, f"must be one of {', '.join(BALANCES)}"),
     ]
     for name, ok, message in checks:
         if not ok:
             raise ValueError(f"{type(cfg).__name__}.{name} = {getattr(cfg, name)!r} {message}")
+
+
+def auto_stop_of(cfg, monitor: tuple[str, ...]) -> AutoStop | None:
+    """The stopping rule of a pre-training phase that watches `monitor`, or None when pre-training is fixed-length."""
+    return AutoStop(monitor, cfg.pretrain_auto_window, cfg.pretrain_auto_tol) if cfg.pretrain_auto else None
+
+
+def arch_of(cfg) -> Arch:
+    """The layer-building choices shared by every config (LayerNorm form, initialisation)."""
+    return Arch(layer_norm_affine=cfg.layer_norm_affine, layer_norm_eps=cfg.layer_norm_eps, init=cfg.init,
+                hidden_bias=getattr(cfg, "hidden_bias", None))
+
+
+def done_flags(batch: Batch, timeouts: str) -> jax.Array:
+    """(B,) 1.0 where a TD target stops bootstrapping: terminals, plus time-outs when `timeouts` is "stop"."""
+    if timeouts == "stop":
+        return jnp.maximum(batch["terminals"], batch["timeouts"])
+    return batch["terminals"]
 
 
 def uniform_actions(key: jax.Array, batch: int, num: int, act_dim: int) -> jax.Array:

@@ -24,7 +24,10 @@ from offrl_jax.algos.common import (
     Batch,
     Model,
     Phase,
+    arch_of,
+    auto_stop_of,
     chain,
+    done_flags,
     gradient_step,
     new_model,
     polyak,
@@ -35,7 +38,13 @@ from offrl_jax.algos.common import (
     validate_common,
 )
 from offrl_jax.data.returns import soft_returns_to_go
-from offrl_jax.nets import CriticEnsemble, TanhGaussianActor, sample_tanh_gaussian, tanh_gaussian_log_prob
+from offrl_jax.nets import (
+    TANH_LOG_DETS,
+    CriticEnsemble,
+    TanhGaussianActor,
+    sample_tanh_gaussian,
+    tanh_gaussian_log_prob,
+)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -47,10 +56,21 @@ class EDACConfig:
     alpha_lr: float = 3e-4
     gamma: float = 0.99
     tau: float = 0.005
-    hidden: tuple[int, ...] = (256, 256, 256)
+    hidden: tuple[int, ...] = (256, 256, 256)  # critic hidden widths (and the actor's unless actor_hidden is set)
+    actor_hidden: tuple[int, ...] | None = None  # None: same as hidden
     actor_layer_norm: bool = True
     critic_layer_norm: bool = True
     layer_norm_affine: bool = True  # learned LN scale/bias; False = the authors' code (elementwise_affine=False)
+    layer_norm_eps: float = 1e-6  # flax's default; torch's (the authors') 1e-5
+    init: str = "flax"  # flax (lecun-normal, zero bias), torch (nn.Linear's default) or orthogonal (CORL's CQL)
+    hidden_bias: float | None = None  # constant hidden-layer bias; CORL's EDAC: 0.1
+    out_init: bool = True  # final layers U(+-1e-3) actor, U(+-3e-3) critics (EDAC); False: the init scheme's own
+    log_std_bounds: tuple[float, float] = (-5.0, 2.0)  # EDAC; CORL's CQL: (-20, 2)
+    log_std_offset: float = 0.0  # added to the raw log-std before clipping; CORL's CQL: -1
+    tanh_log_det: str = "exact"  # log(1 - tanh(u)^2): exact (softplus form) or eps (log(1 - a^2 + 1e-6), CORL)
+    log_alpha_bound: float = 0.0  # > 0: log alpha clipped to +-bound after each offline-RL step (authors: 10)
+    timeouts: str = "bootstrap"  # TD target at a time-out: bootstrap, stop (the authors'), drop the row (CORL's)
+    balance: str = "abs"  # EDAC+BC's normalisation: x / sg|x| (abs) or the authors' x / sg(x) (signed)
     init_alpha: float = 1.0
     backup_entropy: bool = True  # subtract alpha log pi(a'|s') in the TD target
     bc_weight: float = 0.0  # EDAC+BC: actor loss = SAC/sg|SAC| + bc_weight * MSE/sg|MSE| (0 = off)
@@ -60,6 +80,12 @@ class EDACConfig:
     pretrain: Literal["none", "actor", "critic", "actor+critic"] = "actor+critic"
     pretrain_updates: int = 20_000  # split between soft BC and critic regression by actor_pretrain_fraction
     actor_pretrain_fraction: float = 0.5
+    # pretrain_auto: each pre-training phase ends when its supervised losses stop improving (common.AutoStop: the
+    # mean over a window of updates improved by less than tol, relative, for every member), pretrain_updates is then
+    # the cap; the updates left go to offline RL
+    pretrain_auto: bool = False
+    pretrain_auto_window: int = 1_000  # must divide the evaluation interval
+    pretrain_auto_tol: float = 0.01
     lam: float = 0.0
     lambda_mode: Literal["loss", "target"] = "loss"
     entropy_batch: int = 16_384  # rows per batch when computing the per-state entropies for the soft returns
@@ -71,12 +97,22 @@ class EDACConfig:
 
     def __post_init__(self):
         validate_common(self)
+        if not self.eta >= 0:
+            raise ValueError(f"EDACConfig.eta = {self.eta} must be >= 0")
         if self.eta > 0 and self.num_critics < 2:
             raise ValueError(f"EDACConfig.num_critics = {self.num_critics} must be >= 2 for EDAC (eta > 0)")
         if not 0.0 <= self.actor_pretrain_fraction <= 1.0:
             raise ValueError(f"EDACConfig.actor_pretrain_fraction = {self.actor_pretrain_fraction} must be in [0, 1]")
         if self.alpha_lr <= 0 or self.init_alpha <= 0:
             raise ValueError("EDACConfig.alpha_lr and init_alpha must be positive")
+        lo, hi = self.log_std_bounds
+        if not lo < hi:
+            raise ValueError(f"EDACConfig.log_std_bounds = {self.log_std_bounds} must be (low, high) with low < high")
+        if self.tanh_log_det not in TANH_LOG_DETS:
+            raise ValueError(f"EDACConfig.tanh_log_det = {self.tanh_log_det!r} must be one of "
+                             f"{', '.join(TANH_LOG_DETS)}")
+        if not self.log_alpha_bound >= 0:
+            raise ValueError(f"EDACConfig.log_alpha_bound = {self.log_alpha_bound} must be >= 0")
 
 
 @struct.dataclass
@@ -90,9 +126,12 @@ class EDACState:
 class EDAC:
     def __init__(self, config: EDACConfig, obs_dim: int, act_dim: int, num_transitions: int):
         self.cfg, self.obs_dim, self.act_dim, self.num_transitions = config, obs_dim, act_dim, num_transitions
-        self.actor = TanhGaussianActor(act_dim, config.hidden, config.actor_layer_norm, config.layer_norm_affine)
+        arch = arch_of(config)
+        self.actor = TanhGaussianActor(act_dim, config.actor_hidden or config.hidden, config.actor_layer_norm, arch,
+                                       tuple(config.log_std_bounds), config.log_std_offset,
+                                       1e-3 if config.out_init else None)
         critic_kw = dict(num=config.num_critics, hidden=config.hidden, layer_norm=config.critic_layer_norm,
-                         out_scale=3e-3, layer_norm_affine=config.layer_norm_affine)
+                         out_scale=3e-3 if config.out_init else None, arch=arch)
         self.critic = CriticEnsemble(**critic_kw)
         self.critic_per_member = CriticEnsemble(**critic_kw, per_member_actions=True)  # same parameters
         self.actor_tx, self.critic_tx = optax.adam(config.actor_lr), optax.adam(config.critic_lr)
@@ -124,10 +163,10 @@ class EDAC:
         phases = []
         if actor_steps:
             phases.append(Phase("actor_pretrain", single(chain(self.temperature_update, self.soft_bc_update)),
-                                actor_steps))
+                                actor_steps, auto_stop=auto_stop_of(cfg, ("soft_bc_loss",))))
         if critic_steps:
             phases.append(Phase("critic_pretrain", single(self.soft_mc_update), critic_steps,
-                                on_start=self.compute_soft_returns))
+                                on_start=self.compute_soft_returns, auto_stop=auto_stop_of(cfg, ("mc_error",))))
         return phases + [Phase("offline_rl", single(self.rl_update), rl)]
 
     # ---------------------------------------------------------------------------------------- soft returns
@@ -140,7 +179,7 @@ class EDAC:
 
         def entropy(args):
             obs, k = args
-            _, log_prob = sample_tanh_gaussian(k, *self.actor.apply(state.actor.params, obs))
+            _, log_prob = self.sample_policy(state.actor.params, obs, k)
             return -log_prob
 
         keys = jax.random.split(key, chunks.shape[0])
@@ -152,14 +191,14 @@ class EDAC:
 
     # --------------------------------------------------------------------------------------------- pieces
     def sample_policy(self, actor_params, obs: jax.Array, key: jax.Array):
-        return sample_tanh_gaussian(key, *self.actor.apply(actor_params, obs))
+        return sample_tanh_gaussian(key, *self.actor.apply(actor_params, obs), self.cfg.tanh_log_det)
 
     def td_target(self, state: EDACState, batch: Batch, key: jax.Array) -> jax.Array:
         next_action, next_log_prob = self.sample_policy(state.actor.params, batch["next_observations"], key)
         next_q = self.critic.apply(state.critic.target, batch["next_observations"], next_action)
         alpha = jnp.exp(state.log_alpha.params) if self.cfg.backup_entropy else 0.0
-        return L.td_target(batch["rewards"], batch["terminals"], L.soft_value(next_q, next_log_prob, alpha),
-                           self.cfg.gamma)
+        return L.td_target(batch["rewards"], done_flags(batch, self.cfg.timeouts),
+                           L.soft_value(next_q, next_log_prob, alpha), self.cfg.gamma)
 
     def q_and_diversity(self, params, batch: Batch) -> tuple[jax.Array, jax.Array]:
         """Q (N, B) at the dataset actions and the diversity loss, from one forward pass.
@@ -192,7 +231,7 @@ class EDAC:
         td_fn = lambda: self.td_target(state, batch, k_target)  # noqa: E731
         if pretraining:  # the authors' EDAC pre-training averages over critics; its TD loss (below) sums over them
             mc = state.soft_returns[batch["idx"]]
-            loss = L.pretrain_critic_loss(q, mc, td_fn, cfg.lam, cfg.lambda_mode, per_critic="mean")
+            loss = L.pretrain_critic_loss(q, mc, td_fn, cfg.lam, cfg.lambda_mode, per_critic="mean", form=cfg.balance)
             metrics = {"mc_error": jnp.mean((q - mc[None]) ** 2)}
         else:
             loss = L.critic_regression_loss(q, td_fn())
@@ -212,18 +251,20 @@ class EDAC:
         bc = L.bc_loss(action, batch["actions"])  # logged always: how far the policy has moved from the data
         metrics = {"actor_loss": loss, "entropy": -jnp.mean(log_prob), "bc_mse": bc}
         if self.cfg.bc_weight > 0:
-            loss = L.balance_losses(loss, bc, self.cfg.bc_weight)
+            loss = L.balance_losses(loss, bc, self.cfg.bc_weight, self.cfg.balance)
         return loss, metrics
 
     def soft_bc_loss(self, params, state: EDACState, batch: Batch, key: jax.Array):
         mean, log_std = self.actor.apply(params, batch["observations"])
-        _, log_prob_sampled = sample_tanh_gaussian(key, mean, log_std)
-        log_prob_data = tanh_gaussian_log_prob(mean, log_std, batch["actions"])
+        _, log_prob_sampled = sample_tanh_gaussian(key, mean, log_std, self.cfg.tanh_log_det)
+        log_prob_data = tanh_gaussian_log_prob(mean, log_std, batch["actions"], log_det=self.cfg.tanh_log_det)
         loss = L.soft_bc_loss(log_prob_sampled, log_prob_data, jnp.exp(state.log_alpha.params))
         return loss, {"soft_bc_loss": loss, "entropy": -jnp.mean(log_prob_sampled)}
 
     # ------------------------------------------------------------------------------------ update functions
-    def temperature_update(self, state: EDACState, batch: Batch, key: jax.Array):
+    def temperature_update(self, state: EDACState, batch: Batch, key: jax.Array, clip: bool = False):
+        """One step on the temperature; `clip` (offline RL only, as the authors' code): log alpha to
+        +-log_alpha_bound when that is set."""
         _, log_prob = self.sample_policy(state.actor.params, batch["observations"], key)
 
         def loss_fn(log_alpha):
@@ -231,6 +272,9 @@ class EDAC:
             return loss, {"alpha": jnp.exp(log_alpha), "alpha_loss": loss}
 
         log_alpha, metrics = gradient_step(state.log_alpha, self.alpha_tx, loss_fn)
+        if clip and self.cfg.log_alpha_bound > 0:
+            bound = self.cfg.log_alpha_bound
+            log_alpha = log_alpha.replace(params=jnp.clip(log_alpha.params, -bound, bound))
         return state.replace(log_alpha=log_alpha), metrics
 
     def soft_bc_update(self, state: EDACState, batch: Batch, key: jax.Array):
@@ -252,7 +296,8 @@ class EDAC:
     def rl_update(self, state: EDACState, batch: Batch, key: jax.Array):
         """CORL's order: temperature, actor, critic (+ target), all on one minibatch; with `simultaneous_update`
         (CQL) every loss is computed from the incoming state and the three steps are applied together."""
-        updates = (self.temperature_update, self.actor_update, self.td_update)
+        temperature = lambda state, batch, key: self.temperature_update(state, batch, key, clip=True)  # noqa: E731
+        updates = (temperature, self.actor_update, self.td_update)
         if not self.cfg.simultaneous_update:
             return chain(*updates)(state, batch, key)
         (t, m_t), (a, m_a), (c, m_c) = (fn(state, batch, k) for fn, k in zip(updates, jax.random.split(key, 3)))

@@ -23,7 +23,10 @@ from offrl_jax.algos.common import (
     Batch,
     Model,
     Phase,
+    arch_of,
+    auto_stop_of,
     chain,
+    done_flags,
     first,
     gradient_step,
     new_model,
@@ -49,22 +52,37 @@ class TD3BCConfig:
     policy_noise: float = 0.2
     noise_clip: float = 0.5
     policy_delay: int = 2
-    hidden: tuple[int, ...] = (256, 256)
+    hidden: tuple[int, ...] = (256, 256)  # critic hidden widths (and the actor's unless actor_hidden is set)
+    actor_hidden: tuple[int, ...] | None = None  # None: same as hidden (the authors' actor: 3 x 256)
     actor_layer_norm: bool = True
     critic_layer_norm: bool = True
     layer_norm_affine: bool = True  # learned LN scale/bias; False = the authors' code (elementwise_affine=False)
+    layer_norm_eps: float = 1e-6  # flax's default; torch's (the authors') 1e-5
+    init: str = "flax"  # flax (lecun-normal, zero bias), torch (nn.Linear's default) or orthogonal
     num_critics: int = 2
+    timeouts: str = "bootstrap"  # TD target at a time-out: bootstrap, stop (the authors'), drop the row (CORL's)
+    q_scale_eps: float = 1e-8  # lmbda = alpha / (mean|Q| + q_scale_eps); CORL and the authors: 0
     # TD3+BC+CQL: critic loss = TD/sg|TD| + cql_weight * CQL/sg|CQL| (0 = off)
     cql_weight: float = 0.0
+    balance: str = "abs"  # the hybrid's normalisation: x / sg|x| (abs) or the authors' x / sg(x) (signed)
     cql_actions: int = 10
     cql_temperature: float = 1.0
     # pre-training
     pretrain: PretrainMode = "actor+critic"
     pretrain_updates: int = 10_000
+    # pretrain_auto: each pre-training phase ends when its supervised losses stop improving (common.AutoStop: the
+    # mean over a window of updates improved by less than tol, relative, for every member), pretrain_updates is then
+    # the cap; the updates left go to offline RL
+    pretrain_auto: bool = False
+    pretrain_auto_window: int = 1_000  # must divide the evaluation interval
+    pretrain_auto_tol: float = 0.01
     lam: float = 0.0  # TD weight in critic pre-training
     lambda_mode: Literal["loss", "target"] = "loss"  # authors' normalised-loss mixing, or eq. 5 target mixing
     target: Literal["td", "max_mc"] = "td"  # offline-RL critic target; max_mc = Q-Transformer's max(MC, TD)
     bc_only: bool = False  # the BC baseline: actor pre-training for the whole budget
+    # actor-only pre-training (pretrain="actor") Polyak-updates the actor's target; False = the authors' code, whose
+    # actor target stays at its initialisation until offline RL starts (actor+critic updates every target either way)
+    bc_target_updates: bool = True
 
     # vmappable (see with_hparams)
     SWEEPABLE: ClassVar[tuple[str, ...]] = ("alpha", "tau", "policy_noise", "noise_clip")
@@ -73,6 +91,13 @@ class TD3BCConfig:
         validate_common(self)
         if self.policy_delay < 1:
             raise ValueError(f"TD3BCConfig.policy_delay = {self.policy_delay} must be >= 1")
+        if self.pretrain_auto and self.pretrain_auto_window % self.policy_delay:
+            raise ValueError(f"TD3BCConfig.pretrain_auto_window = {self.pretrain_auto_window} must be a multiple of "
+                             f"policy_delay ({self.policy_delay})")
+        if not self.alpha >= 0:
+            raise ValueError(f"TD3BCConfig.alpha = {self.alpha} must be >= 0")
+        if not self.q_scale_eps >= 0:
+            raise ValueError(f"TD3BCConfig.q_scale_eps = {self.q_scale_eps} must be >= 0")
         if self.target not in ("td", "max_mc"):
             raise ValueError(f"TD3BCConfig.target = {self.target!r} must be 'td' or 'max_mc'")
 
@@ -86,12 +111,11 @@ class TD3BCState:
 class TD3BC:
     def __init__(self, config: TD3BCConfig, obs_dim: int, act_dim: int):
         self.cfg, self.obs_dim, self.act_dim = config, obs_dim, act_dim
-        affine = config.layer_norm_affine
-        self.actor = DeterministicActor(act_dim, config.hidden, config.actor_layer_norm, affine)
-        self.critic = CriticEnsemble(config.num_critics, config.hidden, config.critic_layer_norm,
-                                     layer_norm_affine=affine)
+        arch = arch_of(config)
+        self.actor = DeterministicActor(act_dim, config.actor_hidden or config.hidden, config.actor_layer_norm, arch)
+        self.critic = CriticEnsemble(config.num_critics, config.hidden, config.critic_layer_norm, arch=arch)
         self.first_critic = CriticEnsemble(1, config.hidden, config.critic_layer_norm,  # member 0's parameters only
-                                           layer_norm_affine=affine)
+                                           arch=arch)
         self.actor_tx = optax.adam(config.actor_lr)
         self.critic_tx = optax.adam(config.critic_lr)
 
@@ -118,7 +142,9 @@ class TD3BC:
             "critic": self.mc_update,
             "actor+critic": chain(self.bc_update, self.mc_update),
         }.get(cfg.pretrain)
-        phases = [Phase("pretrain", single(pretrain_fn), pre)] if pre else []
+        monitor = {"actor": ("bc_loss",), "critic": ("mc_error",), "actor+critic": ("bc_loss", "mc_error")}
+        auto = auto_stop_of(cfg, monitor.get(cfg.pretrain, ()))
+        phases = [Phase("pretrain", single(pretrain_fn), pre, auto_stop=auto)] if pre else []
         rl -= rl % cfg.policy_delay
         return phases + [Phase("offline_rl", self.rl_update, rl, updates_per_call=cfg.policy_delay)]
 
@@ -127,7 +153,8 @@ class TD3BC:
         next_action = self.actor.apply(state.actor.target, batch["next_observations"])
         next_action = L.target_policy_smoothing(key, next_action, self.cfg.policy_noise, self.cfg.noise_clip)
         next_q = self.critic.apply(state.critic.target, batch["next_observations"], next_action)
-        return L.td_target(batch["rewards"], batch["terminals"], L.clipped_double_q(next_q), self.cfg.gamma)
+        return L.td_target(batch["rewards"], done_flags(batch, self.cfg.timeouts), L.clipped_double_q(next_q),
+                           self.cfg.gamma)
 
     def cql_penalty(self, params, batch: Batch, q_data: jax.Array, key: jax.Array) -> jax.Array:
         obs = repeat_obs(batch["observations"], self.cfg.cql_actions)
@@ -143,14 +170,14 @@ class TD3BC:
         mc = batch["returns"]
         td_fn = lambda: self.td_target(state, batch, k_target)  # noqa: E731
         if pretraining:
-            loss = L.pretrain_critic_loss(q, mc, td_fn, cfg.lam, cfg.lambda_mode)
+            loss = L.pretrain_critic_loss(q, mc, td_fn, cfg.lam, cfg.lambda_mode, form=cfg.balance)
         else:
             target = L.q_transformer_target(mc, td_fn()) if cfg.target == "max_mc" else td_fn()
             loss = L.critic_regression_loss(q, target)
         metrics = {"critic_loss": loss, "q_mean": jnp.mean(q), "mc_error": jnp.mean((q[0] - mc) ** 2)}
         if cfg.cql_weight > 0:
             penalty = self.cql_penalty(params, batch, q, k_cql)
-            loss = L.balance_losses(loss, penalty, cfg.cql_weight)
+            loss = L.balance_losses(loss, penalty, cfg.cql_weight, cfg.balance)
             metrics["cql_penalty"] = penalty
         return loss, metrics
 
@@ -160,7 +187,7 @@ class TD3BC:
         # `self.critic.apply(...)[0]`: the actor's gradient then runs through one critic, not all of them.
         first = jax.tree.map(lambda p: p[:1], state.critic.params)
         q = self.first_critic.apply(first, batch["observations"], pi)[0]
-        loss = L.td3bc_actor_loss(q, pi, batch["actions"], self.cfg.alpha)
+        loss = L.td3bc_actor_loss(q, pi, batch["actions"], self.cfg.alpha, self.cfg.q_scale_eps)
         return loss, {"actor_loss": loss, "bc_mse": L.bc_loss(pi, batch["actions"])}
 
     # --------------------------------------------------------------------------------------- update functions
@@ -170,6 +197,8 @@ class TD3BC:
             return loss, {"bc_loss": loss}
 
         actor, metrics = gradient_step(state.actor, self.actor_tx, loss_fn)
+        if self.cfg.pretrain == "actor" and not self.cfg.bc_target_updates:
+            return state.replace(actor=actor), metrics
         return state.replace(actor=polyak(actor, self.cfg.tau)), metrics
 
     def mc_update(self, state: TD3BCState, batch: Batch, key: jax.Array):

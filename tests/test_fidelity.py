@@ -1,0 +1,199 @@
+"""The authors' mode, switch by switch: every config field that reproduces a detail of the authors' code does what
+docs/fidelity.md says, and `--preset authors` sets them all."""
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from offrl_jax import losses as L
+from offrl_jax.algos import PRESETS, make_algorithm, make_config
+from offrl_jax.algos.common import Phase, done_flags
+from offrl_jax.driver import make_chunk_fn
+from offrl_jax.nets import MLP, Arch, sample_tanh_gaussian, tanh_gaussian_log_prob
+
+
+def test_layer_norm_eps_reaches_the_layer():
+    x = jnp.array([[1e-3, -2e-3, 0.5e-3]])  # pre-activations ~1e-3: their variance is comparable to eps
+    mlp = MLP((3,), 1, arch=Arch(layer_norm_affine=False, layer_norm_eps=1e-5))
+    params = mlp.init(jax.random.PRNGKey(0), x)
+    h = x @ params["params"]["Dense_0"]["kernel"] + params["params"]["Dense_0"]["bias"]
+    for eps, close in ((1e-5, True), (1e-6, False)):
+        normed = (h - h.mean(-1, keepdims=True)) / jnp.sqrt(h.var(-1, keepdims=True) + eps)
+        want = jax.nn.relu(normed) @ params["params"]["Dense_1"]["kernel"] + params["params"]["Dense_1"]["bias"]
+        assert np.allclose(mlp.apply(params, x), want, rtol=1e-5, atol=1e-6) == close
+
+
+def test_torch_init_is_uniform_within_one_over_sqrt_fan_in_and_hidden_bias_constant():
+    x = jnp.ones((1, 64))
+    params = MLP((512,), 4, layer_norm=False, arch=Arch(init="torch")).init(jax.random.PRNGKey(0), x)["params"]
+    bound = 1 / math.sqrt(64)
+    for name in ("kernel", "bias"):
+        w = np.asarray(params["Dense_0"][name])
+        assert np.abs(w).max() <= bound and np.abs(w).max() > 0.95 * bound  # U(-1/sqrt(fan_in), 1/sqrt(fan_in))
+        assert abs(w.std() - bound / math.sqrt(3)) < 0.05 * bound
+    assert np.abs(params["Dense_1"]["kernel"]).max() <= 1 / math.sqrt(512)
+    params = MLP((16,), 2, arch=Arch(init="torch", hidden_bias=0.1)).init(jax.random.PRNGKey(0), x)["params"]
+    np.testing.assert_allclose(params["Dense_0"]["bias"], 0.1)  # CORL's EDAC hidden bias
+    assert not np.allclose(params["Dense_1"]["bias"], 0.1)  # not the output layer
+    orth = MLP((16,), 2, layer_norm=False, arch=Arch(init="orthogonal")).init(jax.random.PRNGKey(0), jnp.ones((1, 8)))
+    k = np.asarray(orth["params"]["Dense_0"]["kernel"])  # (8, 16): orthonormal rows scaled by sqrt(2)
+    np.testing.assert_allclose(k @ k.T, 2.0 * np.eye(8), atol=1e-5)
+
+
+def test_done_flags_per_timeout_mode():
+    batch = {"terminals": jnp.array([0.0, 1.0, 0.0]), "timeouts": jnp.array([0.0, 0.0, 1.0])}
+    np.testing.assert_array_equal(done_flags(batch, "bootstrap"), [0, 1, 0])
+    np.testing.assert_array_equal(done_flags(batch, "drop"), [0, 1, 0])  # dropped rows are never sampled
+    np.testing.assert_array_equal(done_flags(batch, "stop"), [0, 1, 1])
+
+
+def test_timeouts_drop_never_samples_a_timeout_row():
+    n = 50
+    timeouts = jnp.zeros(n).at[jnp.arange(4, n, 5)].set(1.0)  # every 5th row
+    data = {k: jnp.zeros((n, 2)) for k in ("observations", "next_observations", "actions")}
+    data |= {"rewards": jnp.arange(n, dtype=jnp.float32), "terminals": jnp.zeros(n), "timeouts": timeouts,
+             "returns": jnp.zeros(n)}
+    data["rows"] = jnp.asarray(np.flatnonzero(np.asarray(timeouts) == 0), jnp.int32)
+
+    def update(state, batch, key):
+        return state, {"timeout_rows": jnp.sum(batch["timeouts"]), "rows_seen": jnp.sum(batch["idx"] % 5 == 4)}
+
+    fn = make_chunk_fn(Phase("probe", update, 100), batch_size=64, num_calls=100)
+    _, metrics = fn(jnp.zeros((1,)), data, jax.random.split(jax.random.PRNGKey(0), 1))
+    assert float(metrics["timeout_rows"][0]) == 0 and float(metrics["rows_seen"][0]) == 0
+
+
+def test_signed_balance_reverses_the_gradient_of_a_negative_term():
+    value, grad = jax.value_and_grad(lambda x: L.normalized(x, "signed"))(jnp.array(-2.0))
+    assert float(value) == 1.0 and float(grad) == pytest.approx(-0.5)  # d/dx x/sg(x) = 1/x
+    value, grad = jax.value_and_grad(lambda x: L.normalized(x, "abs"))(jnp.array(-2.0))
+    assert float(value) == pytest.approx(-1.0) and float(grad) == pytest.approx(0.5)
+    # the hybrid: a / sg(a) + w b / sg(b) with b < 0: b's gradient is w / b
+    grads = jax.grad(L.balance_losses, argnums=(0, 1))(jnp.array(2.0), jnp.array(-4.0), 3.0, "signed")
+    assert [float(g) for g in grads] == pytest.approx([0.5, -0.75])
+
+
+def test_td3bc_lambda_without_epsilon():
+    q, pi, a = jnp.array([2.0, -4.0]), jnp.zeros((2, 1)), jnp.zeros((2, 1))
+    assert float(L.td3bc_actor_loss(q, pi, a, 2.5, q_scale_eps=0.0)) == pytest.approx(-2.5 * (-1.0) / 3.0, abs=1e-7)
+    small = jnp.array([1e-7, -1e-7])  # |Q| ~ eps: the default epsilon halves lmbda, CORL's form does not
+    assert float(L.td3bc_actor_loss(small, pi, a, 1.0, q_scale_eps=0.0)) == pytest.approx(-1e7 * 0.0, abs=1e-6)
+    assert float(jax.grad(lambda q: L.td3bc_actor_loss(q, pi, a, 1.0, q_scale_eps=0.0))(small)[0]) == \
+        pytest.approx(-0.5 / 1e-7, rel=1e-4)
+    assert float(jax.grad(lambda q: L.td3bc_actor_loss(q, pi, a, 1.0))(small)[0]) == pytest.approx(
+        -0.5 / 1.1e-7, rel=1e-4)
+
+
+def test_tanh_log_det_forms():
+    # u = 1: exact correction log(1 - tanh(1)^2); "eps" adds 1e-6 inside the log (CORL)
+    mean, log_std, u = jnp.zeros((1, 1)), jnp.zeros((1, 1)), 1.0
+    gauss = -0.5 - 0.5 * np.log(2 * np.pi)
+    exact = tanh_gaussian_log_prob(mean, log_std, jnp.full((1, 1), np.tanh(u)))
+    eps = tanh_gaussian_log_prob(mean, log_std, jnp.full((1, 1), np.tanh(u)), log_det="eps")
+    np.testing.assert_allclose(exact, [gauss - np.log(1 - np.tanh(u) ** 2)], rtol=1e-5)
+    np.testing.assert_allclose(eps, [gauss - np.log(1 - np.tanh(u) ** 2 + 1e-6)], rtol=1e-5)
+    # far in the tail (tanh(u) = 1 in float32) the eps form caps the correction at -log(1e-6); exact keeps growing
+    mean, log_std = jnp.full((1, 1), 30.0), jnp.full((1, 1), -5.0)
+    _, lp_eps = sample_tanh_gaussian(jax.random.PRNGKey(0), mean, log_std, "eps")
+    _, lp_exact = sample_tanh_gaussian(jax.random.PRNGKey(0), mean, log_std, "exact")
+    assert float(lp_exact[0] - lp_eps[0]) > 40.0
+
+
+def tiny_batch(obs_dim=3, act_dim=2, b=8, k=None, seed=0):
+    rng = np.random.default_rng(seed)
+    shape = (b,) if k is None else (k, b)
+    batch = {"observations": rng.normal(size=(*shape, obs_dim)),
+             "next_observations": rng.normal(size=(*shape, obs_dim)),
+             "actions": rng.uniform(-1, 1, size=(*shape, act_dim)), "rewards": rng.normal(size=shape),
+             "terminals": np.zeros(shape), "timeouts": np.zeros(shape), "returns": rng.normal(size=shape) * 10}
+    batch = {k2: jnp.asarray(v, jnp.float32) for k2, v in batch.items()}
+    return batch | {"idx": jnp.zeros(shape, jnp.int32)}
+
+
+def test_log_alpha_bound_clips_in_offline_rl_only():
+    cfg = make_config("edac", "hopper", num_critics=2, hidden=(8,), log_alpha_bound=0.1, alpha_lr=1.0, init_alpha=1.0)
+    algo = make_algorithm(cfg, 3, 2, 8)
+    state = algo.init(jax.random.PRNGKey(0))
+    batch = tiny_batch()
+    for _ in range(3):  # lr 1: log alpha moves by ~1 per step without the clip
+        state_free, _ = algo.temperature_update(state, batch, jax.random.PRNGKey(1))
+        state, _ = algo.rl_update(state, batch, jax.random.PRNGKey(1))
+    assert abs(float(state.log_alpha.params)) <= 0.1 + 1e-7
+    assert abs(float(state_free.log_alpha.params)) > 0.1  # pre-training's temperature steps are not clipped
+
+
+def test_actor_only_pretraining_without_target_updates_keeps_the_init():
+    for flag, moved in ((True, True), (False, False)):
+        cfg = make_config("td3bc", "hopper", pretrain="actor", hidden=(8,), bc_target_updates=flag)
+        algo = make_algorithm(cfg, 3, 2, 8)
+        state = algo.init(jax.random.PRNGKey(0))
+        new, _ = algo.bc_update(state, tiny_batch(), jax.random.PRNGKey(1))
+        changed = any(not np.allclose(a, b) for a, b in zip(jax.tree.leaves(new.actor.target),
+                                                               jax.tree.leaves(state.actor.target)))
+        assert changed == moved
+    # actor+critic pre-training updates the actor target either way (the authors' pretrain_actorcritic does)
+    cfg = make_config("td3bc", "hopper", pretrain="actor+critic", hidden=(8,), bc_target_updates=False)
+    algo = make_algorithm(cfg, 3, 2, 8)
+    state = algo.init(jax.random.PRNGKey(0))
+    new, _ = algo.bc_update(state, tiny_batch(), jax.random.PRNGKey(1))
+    assert not np.allclose(jax.tree.leaves(new.actor.target)[0], jax.tree.leaves(state.actor.target)[0])
+
+
+def test_actor_and_critic_widths_are_separate():
+    cfg = make_config("td3bc", "hopper", actor_hidden=(16, 16, 16), hidden=(8, 8))
+    algo = make_algorithm(cfg, 3, 2, 8)
+    state = algo.init(jax.random.PRNGKey(0))
+    actor_dense = [k for k in state.actor.params["params"]["MLP_0"] if k.startswith("Dense")]
+    assert len(actor_dense) == 4 and state.actor.params["params"]["MLP_0"]["Dense_0"]["kernel"].shape == (3, 16)
+    critic = state.critic.params["params"]["VmapCritic_0"]["MLP_0"]
+    assert len([k for k in critic if k.startswith("Dense")]) == 3 and critic["Dense_0"]["kernel"].shape == (2, 5, 8)
+
+
+def test_cql_log_std_offset_and_bounds():
+    cfg = make_config("cql", "door", hidden=(8,), preset="authors")
+    algo = make_algorithm(cfg, 3, 2, 8)
+    state = algo.init(jax.random.PRNGKey(0))
+    _, log_std = algo.actor.apply(state.actor.params, jnp.zeros((1, 3)))
+    raw_out = state.actor.params["params"]["MLP_0"]["Dense_1"]["bias"]  # zero bias at init (orthogonal scheme)
+    np.testing.assert_allclose(raw_out, 0.0)
+    np.testing.assert_allclose(log_std, -1.0, atol=1e-6)  # offset -1 on a zero output
+    _, log_std = algo.actor.apply(state.actor.params, jnp.full((1, 3), -1e6))
+    assert float(log_std.min()) >= -20.0
+
+
+def test_authors_preset_values_and_precedence():
+    td3 = make_config("td3bc", "hopper", preset="authors")
+    assert (td3.alpha, td3.actor_hidden, td3.hidden, td3.layer_norm_affine, td3.layer_norm_eps, td3.init,
+            td3.timeouts, td3.q_scale_eps, td3.balance, td3.bc_target_updates) == (
+        10.0, (256, 256, 256), (256, 256), False, 1e-5, "torch", "stop", 0.0, "signed", False)
+    edac = make_config("edac_bc", "walker2d", preset="authors")
+    assert (edac.hidden_bias, edac.tanh_log_det, edac.log_alpha_bound, edac.timeouts, edac.balance) == (
+        0.1, "eps", 10.0, "stop", "signed")
+    assert make_config("td3bc", "door", preset="authors").alpha == 0.1  # the paper's Table 3, not their config's 1.0
+    assert make_config("td3bc", "hopper", preset="authors", timeouts="drop").timeouts == "drop"  # flags win
+    assert make_config("cql", "door", preset="authors").alpha_lr == 3e-5
+    with pytest.raises(ValueError, match="unknown preset"):
+        make_config("td3bc", "hopper", preset="nope")
+    assert set(PRESETS) == {"authors"}
+
+
+def test_authors_preset_from_the_command_line():
+    from experiments import adroit_door, mujoco_medium
+
+    args = mujoco_medium.make_parser().parse_args([])
+    default = dict(mujoco_medium.build(args).variants[0].overrides)
+    assert default["alpha"] == 2.5 and "init" not in default  # the main job's own alpha, the library's defaults
+    args = mujoco_medium.make_parser().parse_args(["--preset", "authors", "--timeouts", "drop"])
+    for v in mujoco_medium.build(args).variants:
+        o = dict(v.overrides)
+        assert "alpha" not in o and o["init"] == "torch" and o["timeouts"] == "drop"  # per-env alpha: hopper 10
+        assert o["actor_hidden"] == (256, 256, 256)
+    p = mujoco_medium.make_parser()
+    studies = mujoco_medium.build(p.parse_args(["--preset", "paper", "authors"]))
+    assert len(studies) == 6 and all(dict(v.overrides)["balance"] == "signed" for s in studies for v in s.variants)
+    (study,) = [adroit_door.build(adroit_door.make_parser().parse_args(
+        ["--preset", "authors", "--variants", "TD3+BC+CQL", "--balance", "abs"]))]
+    o = dict(study.variants[0].overrides)
+    assert o["balance"] == "abs" and o["init"] == "torch"
