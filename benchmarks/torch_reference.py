@@ -9,6 +9,10 @@ Same shapes as benchmarks.throughput: hopper (obs 11, act 3), 100k random transi
 (TD3+BC: 2x256 + LayerNorm, twin critics, policy delay 2; EDAC: 3x256 + LayerNorm, N = 10 vectorised critics,
 eta = 1), one seed.  Like CORL, the PyTorch TD3+BC actor loss evaluates critic 1 only, and the PyTorch EDAC
 diversity loss runs its own second forward pass of the ensemble (CORL's `_critic_diversity_loss`).
+
+The classes take keyword arguments beyond the benchmark's (sizes, LayerNorm form, what a TD target treats as done,
+the tanh log-det form, a log-alpha bound, injected sampling noise, the pre-training updates), all defaulting to the
+benchmark's settings, so that tests/test_parity_torch.py can check in float64 that the JAX updates equal these.
 """
 from __future__ import annotations
 
@@ -29,12 +33,21 @@ from offrl_jax.cli import OneLineParser
 OBS_DIM, ACT_DIM, BATCH, ROWS = 11, 3, 256, 100_000
 
 
-def mlp(in_dim: int, hidden: tuple[int, ...], out_dim: int, layer_norm: bool = True) -> nn.Sequential:
+def mlp(in_dim: int, hidden: tuple[int, ...], out_dim: int, layer_norm: bool = True, ln_affine: bool = True,
+        ln_eps: float = 1e-5) -> nn.Sequential:
     layers: list[nn.Module] = []
     for width in hidden:
-        layers += [nn.Linear(in_dim, width), *([nn.LayerNorm(width)] if layer_norm else []), nn.ReLU()]
+        norm = [nn.LayerNorm(width, eps=ln_eps, elementwise_affine=ln_affine)] if layer_norm else []
+        layers += [nn.Linear(in_dim, width), *norm, nn.ReLU()]
         in_dim = width
     return nn.Sequential(*layers, nn.Linear(in_dim, out_dim))
+
+
+def polyak(net: nn.Module, target: nn.Module, tau: float) -> None:
+    """target <- tau * net + (1 - tau) * target, in place."""
+    with torch.no_grad():
+        for p, tp in zip(net.parameters(), target.parameters()):
+            tp.data.mul_(1 - tau).add_(tau * p.data)
 
 
 class Replay:
@@ -55,20 +68,30 @@ class Replay:
 
 
 class Critic(nn.Module):
-    def __init__(self):
+    def __init__(self, obs_dim: int = OBS_DIM, act_dim: int = ACT_DIM, hidden: tuple[int, ...] = (256, 256),
+                 **ln):
         super().__init__()
-        self.net = mlp(OBS_DIM + ACT_DIM, (256, 256), 1)
+        self.net = mlp(obs_dim + act_dim, hidden, 1, **ln)
 
     def forward(self, s, a):
         return self.net(torch.cat([s, a], 1))
 
 
 class TD3BC:
+    """CORL's TD3+BC.  `train(batch)` is one update of the offline-RL phase (critic every call, actor and targets
+    every `policy_freq` calls); `bc_update` / `mc_update` are the pre-training updates (BC on the actor, Monte-Carlo
+    regression on the critics, each followed by its targets' Polyak update).  batch = (state, action, reward,
+    next_state, done), reward and done (B, 1); `done` is whatever stops bootstrapping (terminal, or terminal or
+    time-out)."""
+
     def __init__(self, alpha: float = 10.0, gamma: float = 0.99, tau: float = 0.005, policy_noise: float = 0.2,
-                 noise_clip: float = 0.5, policy_freq: int = 2, lr: float = 3e-4):
-        self.actor = mlp(OBS_DIM, (256, 256), ACT_DIM)
+                 noise_clip: float = 0.5, policy_freq: int = 2, lr: float = 3e-4, obs_dim: int = OBS_DIM,
+                 act_dim: int = ACT_DIM, hidden: tuple[int, ...] = (256, 256),
+                 actor_hidden: tuple[int, ...] | None = None, ln_affine: bool = True, ln_eps: float = 1e-5):
+        ln = dict(ln_affine=ln_affine, ln_eps=ln_eps)
+        self.actor = mlp(obs_dim, actor_hidden or hidden, act_dim, **ln)
         self.actor_target = copy.deepcopy(self.actor)
-        self.critic_1, self.critic_2 = Critic(), Critic()
+        self.critic_1, self.critic_2 = Critic(obs_dim, act_dim, hidden, **ln), Critic(obs_dim, act_dim, hidden, **ln)
         self.critic_1_target, self.critic_2_target = copy.deepcopy(self.critic_1), copy.deepcopy(self.critic_2)
         self.actor_opt = torch.optim.Adam(self.actor.parameters(), lr=lr)
         self.critic_1_opt = torch.optim.Adam(self.critic_1.parameters(), lr=lr)
@@ -77,22 +100,34 @@ class TD3BC:
         self.policy_noise, self.noise_clip, self.policy_freq = policy_noise, noise_clip, policy_freq
         self.total_it = 0
 
-    def train(self, batch) -> None:
-        self.total_it += 1
-        state, action, reward, next_state, done = batch
+    def td_target(self, reward, next_state, done):
         with torch.no_grad():
-            noise = (torch.randn_like(action) * self.policy_noise).clamp(-self.noise_clip, self.noise_clip)
-            next_action = (torch.tanh(self.actor_target(next_state)) + noise).clamp(-1.0, 1.0)
+            next_action = torch.tanh(self.actor_target(next_state))
+            noise = (torch.randn_like(next_action) * self.policy_noise).clamp(-self.noise_clip, self.noise_clip)
+            next_action = (next_action + noise).clamp(-1.0, 1.0)
             target_q = torch.min(self.critic_1_target(next_state, next_action),
                                  self.critic_2_target(next_state, next_action))
-            target_q = reward + (1 - done) * self.gamma * target_q
-        critic_loss = (F.mse_loss(self.critic_1(state, action), target_q)
-                       + F.mse_loss(self.critic_2(state, action), target_q))
+            return reward + (1 - done) * self.gamma * target_q
+
+    def critic_step(self, critic_loss) -> None:
         self.critic_1_opt.zero_grad()
         self.critic_2_opt.zero_grad()
         critic_loss.backward()
         self.critic_1_opt.step()
         self.critic_2_opt.step()
+
+    def update_targets(self, actor: bool = True) -> None:
+        polyak(self.critic_1, self.critic_1_target, self.tau)
+        polyak(self.critic_2, self.critic_2_target, self.tau)
+        if actor:
+            polyak(self.actor, self.actor_target, self.tau)
+
+    def train(self, batch) -> None:
+        self.total_it += 1
+        state, action, reward, next_state, done = batch
+        target_q = self.td_target(reward, next_state, done)
+        self.critic_step(F.mse_loss(self.critic_1(state, action), target_q)
+                         + F.mse_loss(self.critic_2(state, action), target_q))
         if self.total_it % self.policy_freq == 0:
             pi = torch.tanh(self.actor(state))
             q = self.critic_1(state, pi)
@@ -101,11 +136,29 @@ class TD3BC:
             self.actor_opt.zero_grad()
             actor_loss.backward()
             self.actor_opt.step()
-            with torch.no_grad():
-                for net, target in ((self.critic_1, self.critic_1_target), (self.critic_2, self.critic_2_target),
-                                    (self.actor, self.actor_target)):
-                    for p, tp in zip(net.parameters(), target.parameters()):
-                        tp.data.mul_(1 - self.tau).add_(self.tau * p.data)
+            self.update_targets()
+
+    def bc_update(self, batch) -> None:
+        """Pre-training: one BC (MSE) step on the actor, then the actor target's Polyak update."""
+        state, action = batch[:2]
+        loss = F.mse_loss(torch.tanh(self.actor(state)), action)
+        self.actor_opt.zero_grad()
+        loss.backward()
+        self.actor_opt.step()
+        polyak(self.actor, self.actor_target, self.tau)
+
+    def mc_update(self, batch, returns, lam: float = 0.0) -> None:
+        """Pre-training: one critic step on the Monte-Carlo returns (B, 1), the authors' lambda mixing with TD
+        (1 - lam) L_MC / sg(L_MC) + lam L_TD / sg(L_TD) when lam > 0, then the critic targets' Polyak update."""
+        state, action, reward, next_state, done = batch
+        q1, q2 = self.critic_1(state, action), self.critic_2(state, action)
+        loss = F.mse_loss(q1, returns) + F.mse_loss(q2, returns)
+        if lam > 0:
+            target_q = self.td_target(reward, next_state, done)
+            td = F.mse_loss(q1, target_q) + F.mse_loss(q2, target_q)
+            loss = (1 - lam) * loss / loss.detach() + lam * td / td.detach()
+        self.critic_step(loss)
+        self.update_targets(actor=False)
 
 
 # ------------------------------------------------------------------------------------------------------------- EDAC
@@ -125,14 +178,19 @@ class VectorizedLinear(nn.Module):
 
 
 class VectorizedCritic(nn.Module):
-    def __init__(self, num_critics: int, hidden: int = 256, depth: int = 3):
+    """CORL's ensemble.  Its LayerNorms, with affine parameters, share them across the members."""
+
+    def __init__(self, num_critics: int, hidden: int | tuple[int, ...] = 256, depth: int = 3, obs_dim: int = OBS_DIM,
+                 act_dim: int = ACT_DIM, ln_affine: bool = True, ln_eps: float = 1e-5):
         super().__init__()
+        widths = (hidden,) * depth if isinstance(hidden, int) else tuple(hidden)
         layers: list[nn.Module] = []
-        in_dim = OBS_DIM + ACT_DIM
-        for _ in range(depth):
-            layers += [VectorizedLinear(in_dim, hidden, num_critics), nn.LayerNorm(hidden), nn.ReLU()]
-            in_dim = hidden
-        layers.append(VectorizedLinear(hidden, 1, num_critics))
+        in_dim = obs_dim + act_dim
+        for width in widths:
+            layers += [VectorizedLinear(in_dim, width, num_critics),
+                       nn.LayerNorm(width, eps=ln_eps, elementwise_affine=ln_affine), nn.ReLU()]
+            in_dim = width
+        layers.append(VectorizedLinear(in_dim, 1, num_critics))
         self.critic = nn.Sequential(*layers)
         self.num_critics = num_critics
 
@@ -144,27 +202,60 @@ class VectorizedCritic(nn.Module):
 
 
 class Actor(nn.Module):
-    def __init__(self, hidden: int = 256):
-        super().__init__()
-        self.trunk = nn.Sequential(nn.Linear(OBS_DIM, hidden), nn.LayerNorm(hidden), nn.ReLU(),
-                                   nn.Linear(hidden, hidden), nn.LayerNorm(hidden), nn.ReLU(),
-                                   nn.Linear(hidden, hidden), nn.LayerNorm(hidden), nn.ReLU())
-        self.mu, self.log_sigma = nn.Linear(hidden, ACT_DIM), nn.Linear(hidden, ACT_DIM)
+    """Tanh-Gaussian actor.  `forward(state, noise)` samples a = tanh(mu + sigma * noise), noise ~ N(0, 1) unless
+    given; log_det "eps": log(1 - a^2 + 1e-6) (CORL), "exact": 2 (log 2 - u - softplus(-2u)) (torch's
+    TanhTransform)."""
 
-    def forward(self, state):
+    def __init__(self, hidden: int | tuple[int, ...] = 256, obs_dim: int = OBS_DIM, act_dim: int = ACT_DIM,
+                 ln_affine: bool = True, ln_eps: float = 1e-5, log_det: str = "eps"):
+        super().__init__()
+        widths = (hidden,) * 3 if isinstance(hidden, int) else tuple(hidden)
+        layers: list[nn.Module] = []
+        in_dim = obs_dim
+        for width in widths:
+            layers += [nn.Linear(in_dim, width), nn.LayerNorm(width, eps=ln_eps, elementwise_affine=ln_affine),
+                       nn.ReLU()]
+            in_dim = width
+        self.trunk = nn.Sequential(*layers)
+        self.mu, self.log_sigma = nn.Linear(in_dim, act_dim), nn.Linear(in_dim, act_dim)
+        self.log_det = log_det
+
+    def dist(self, state):
         h = self.trunk(state)
         mu, log_sigma = self.mu(h), torch.clip(self.log_sigma(h), -5, 2)
-        dist = torch.distributions.Normal(mu, torch.exp(log_sigma))
-        action = dist.rsample()
-        tanh_action = torch.tanh(action)
-        log_prob = dist.log_prob(action).sum(-1) - torch.log(1 - tanh_action.pow(2) + 1e-6).sum(-1)
-        return tanh_action, log_prob
+        return torch.distributions.Normal(mu, torch.exp(log_sigma))
+
+    def log_prob_pre_tanh(self, dist, u):
+        if self.log_det == "eps":
+            log_det = torch.log(1 - torch.tanh(u).pow(2) + 1e-6)
+        else:
+            log_det = 2.0 * (math.log(2.0) - u - F.softplus(-2.0 * u))
+        return dist.log_prob(u).sum(-1) - log_det.sum(-1)
+
+    def forward(self, state, noise=None):
+        dist = self.dist(state)
+        action = dist.rsample() if noise is None else dist.loc + dist.scale * noise
+        return torch.tanh(action), self.log_prob_pre_tanh(dist, action)
+
+    def log_prob(self, state, action, eps: float = 1e-6):
+        """log pi(action | state) of a dataset action, clipped to +-(1 - eps) before atanh."""
+        return self.log_prob_pre_tanh(self.dist(state), torch.atanh(action.clamp(-1 + eps, 1 - eps)))
 
 
 class EDAC:
+    """CORL's EDAC.  `update(batch, noise)`: temperature, actor, critic (+ target), in that order, each step seeing
+    the one before; `noise` = (temperature's, actor's, TD target's) standard-normal draws, each (B, act_dim), or None
+    to sample.  `log_alpha_bound` > 0 clips log alpha after its step.  `pretrain_actor_update` (temperature + soft
+    BC) and `pretrain_critic_update` (regression on soft returns, mean over critics, + eta * diversity) are the
+    paper's pre-training updates."""
+
     def __init__(self, num_critics: int = 10, eta: float = 1.0, gamma: float = 0.99, tau: float = 0.005,
-                 lr: float = 3e-4):
-        self.actor, self.critic = Actor(), VectorizedCritic(num_critics)
+                 lr: float = 3e-4, obs_dim: int = OBS_DIM, act_dim: int = ACT_DIM,
+                 hidden: int | tuple[int, ...] = 256, actor_hidden: int | tuple[int, ...] | None = None,
+                 ln_affine: bool = True, ln_eps: float = 1e-5, log_det: str = "eps", log_alpha_bound: float = 0.0):
+        ln = dict(ln_affine=ln_affine, ln_eps=ln_eps)
+        self.actor = Actor(actor_hidden or hidden, obs_dim, act_dim, log_det=log_det, **ln)
+        self.critic = VectorizedCritic(num_critics, hidden, obs_dim=obs_dim, act_dim=act_dim, **ln)
         self.target_critic = copy.deepcopy(self.critic)
         self.log_alpha = torch.tensor([0.0], requires_grad=True)
         self.actor_opt = torch.optim.Adam(self.actor.parameters(), lr=lr)
@@ -172,7 +263,8 @@ class EDAC:
         self.alpha_opt = torch.optim.Adam([self.log_alpha], lr=lr)
         self.alpha = self.log_alpha.exp().detach()
         self.num_critics, self.eta, self.gamma, self.tau = num_critics, eta, gamma, tau
-        self.target_entropy = -float(ACT_DIM)
+        self.target_entropy = -float(act_dim)
+        self.log_alpha_bound = log_alpha_bound
 
     def diversity_loss(self, state, action):
         n = self.num_critics
@@ -182,39 +274,64 @@ class EDAC:
         grads = torch.autograd.grad(q_ensemble.sum(), action, retain_graph=True, create_graph=True)[0]
         grads = grads / (torch.norm(grads, p=2, dim=2).unsqueeze(-1) + 1e-10)
         grads = grads.transpose(0, 1)
-        masks = torch.eye(n).unsqueeze(0).repeat(grads.shape[0], 1, 1)
+        masks = torch.eye(n, dtype=grads.dtype).unsqueeze(0).repeat(grads.shape[0], 1, 1)
         gram = (1 - masks) * (grads @ grads.permute(0, 2, 1))
         return gram.sum(dim=(1, 2)).mean() / (n - 1)
 
-    def update(self, batch) -> None:
-        state, action, reward, next_state, done = batch
+    def temperature_update(self, state, noise=None, clip: bool = True) -> None:
         with torch.no_grad():
-            _, log_prob = self.actor(state)
+            _, log_prob = self.actor(state, noise)
         alpha_loss = (-self.log_alpha * (log_prob + self.target_entropy)).mean()
         self.alpha_opt.zero_grad()
         alpha_loss.backward()
         self.alpha_opt.step()
+        if clip and self.log_alpha_bound > 0:
+            with torch.no_grad():
+                self.log_alpha.clamp_(-self.log_alpha_bound, self.log_alpha_bound)
         self.alpha = self.log_alpha.exp().detach()
 
-        pi, log_prob = self.actor(state)
+    def critic_step(self, loss) -> None:
+        self.critic_opt.zero_grad()
+        loss.backward()
+        self.critic_opt.step()
+        polyak(self.critic, self.target_critic, self.tau)
+
+    def update(self, batch, noise=None) -> None:
+        state, action, reward, next_state, done = batch
+        noise_alpha, noise_actor, noise_target = (None, None, None) if noise is None else noise
+        self.temperature_update(state, noise_alpha)
+
+        pi, log_prob = self.actor(state, noise_actor)
         actor_loss = (self.alpha * log_prob - self.critic(state, pi).min(0).values).mean()
         self.actor_opt.zero_grad()
         actor_loss.backward()
         self.actor_opt.step()
 
         with torch.no_grad():
-            next_action, next_log_prob = self.actor(next_state)
+            next_action, next_log_prob = self.actor(next_state, noise_target)
             q_next = self.target_critic(next_state, next_action).min(0).values - self.alpha * next_log_prob
             target = reward.squeeze(-1) + self.gamma * (1 - done.squeeze(-1)) * q_next
         q = self.critic(state, action)
         critic_loss = ((q - target.view(1, -1)) ** 2).mean(dim=1).sum(dim=0)
-        loss = critic_loss + self.eta * self.diversity_loss(state, action)
-        self.critic_opt.zero_grad()
+        self.critic_step(critic_loss + self.eta * self.diversity_loss(state, action))
+
+    def pretrain_actor_update(self, batch, noise=None) -> None:
+        """Temperature step (no clipping), then soft BC E[alpha log pi(a~|s) - log pi(a|s)] on the actor."""
+        state, action = batch[:2]
+        noise_alpha, noise_actor = (None, None) if noise is None else noise
+        self.temperature_update(state, noise_alpha, clip=False)
+        _, log_prob = self.actor(state, noise_actor)
+        loss = (self.alpha * log_prob - self.actor.log_prob(state, action)).mean()
+        self.actor_opt.zero_grad()
         loss.backward()
-        self.critic_opt.step()
-        with torch.no_grad():
-            for p, tp in zip(self.critic.parameters(), self.target_critic.parameters()):
-                tp.data.mul_(1 - self.tau).add_(self.tau * p.data)
+        self.actor_opt.step()
+
+    def pretrain_critic_update(self, batch, soft_returns) -> None:
+        """Regression on the soft returns-to-go (B,), mean over the critics, + eta * diversity."""
+        state, action = batch[:2]
+        q = self.critic(state, action)
+        loss = ((q - soft_returns.view(1, -1)) ** 2).mean(dim=1).mean(dim=0)
+        self.critic_step(loss + self.eta * self.diversity_loss(state, action))
 
 
 # ----------------------------------------------------------------------------------------------------------- timing
