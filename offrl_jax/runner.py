@@ -521,8 +521,8 @@ def summary_table(summary: list[dict]) -> str:
         trend = known[0].get("asymptote_trend")
         head += (f"; asymptote (from-scratch final) {known[0]['asymptote']:.1f}"
                  + (f", its trend over the last 20 % of evaluations {trend:+.1f}" if trend is not None else ""))
-    cols = "| variant | final score | updates to 90 % | seconds to 90 % | pre-training updates |"
-    rule = "|---|--:|--:|--:|--:|"
+    cols = "| variant | final score | updates to 90 % | seconds to 90 % | pre-training updates | peak (fall to final) |"
+    rule = "|---|--:|--:|--:|--:|--:|"
     if per_variant:
         cols, rule = cols + " asymptote (trend) |", rule + "--:|"
     lines = [head, "", cols, rule]
@@ -532,8 +532,10 @@ def summary_table(summary: list[dict]) -> str:
         gone = s.get("seeds_diverged") or []  # older summaries lack the key
         variant = s["variant"] + (f" ({len(gone)} seed(s) diverged, not in the mean)" if gone else "")
         final = f"{s['final_score_mean']:.1f} ± {s['final_score_ci95']:.1f}" if _known(s["final_score_mean"]) else "n/a"
+        peak = s.get("peak_score_mean")  # older summaries lack it
+        peak = (f"{peak:.1f} at {s['peak_update']:,} ({s['fall_from_peak']:.1f})" if _known(peak) else "n/a")
         row = (f"| {variant} | {final} | {u} | {t} | "
-               f"{s['pretrain_updates']:,} |")
+               f"{s['pretrain_updates']:,} | {peak} |")
         if per_variant:
             tr = s.get("asymptote_trend")
             row += (f" {s['asymptote']:.1f}" if _known(s["asymptote"]) else " n/a") + (
