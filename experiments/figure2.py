@@ -3,7 +3,7 @@
 CPU-sized defaults (the paper runs 1M updates on a GPU), 3 vmapped seeds: TD3+BC 30k updates (10k pre-training),
 evaluation every 2.5k (~25 min per env on 2 cores); EDAC with 10 critics for 16k updates (12k pre-training: 3k soft
 BC + 9k soft-return critic; `--pretrain-updates` / `--actor-pretrain-fraction` change it), evaluation every 1k.
-EDAC's 10-critic updates are what bound its budget: measured with 2 seeds on one core (session 5, hopper), soft BC
+EDAC's 10-critic updates are what bound its budget: measured with 2 seeds on one core (2026-11-22, hopper), soft BC
 takes ~10 s per 1k updates, critic pre-training ~190-290 s and EDAC ~480 s, so the from-scratch arm alone takes
 ~2 h and the pre-trained arm ~1.2 h (3 seeds: about 1.5x).  Each (env, algo) pair goes to its own sub-directory.
 
@@ -16,8 +16,8 @@ from experiments.mujoco_medium import ENVS, LABELS, make_study, parser, pretrain
 from offrl_jax.runner import Variant
 
 # Unless given on the command line: 3k soft BC + 9k soft-return critic updates.  The critic starts near 0 (EDAC's
-# 3e-3 output init) and needs ~5k Adam steps just to reach the returns' scale (~300 on hopper); with 3k the
-# session-3 run handed over an unfitted critic and collapsed (RESULTS.md, Figure 2 EDAC).
+# 3e-3 output init) and needs ~5k Adam steps just to reach the returns' scale (~300 on hopper); with 3k (the default
+# before 2345a4a) the run handed over an unfitted critic and collapsed (RESULTS.md, Figure 2 EDAC).
 EDAC_PRETRAIN = {"pretrain_updates": 12_000, "actor_pretrain_fraction": 0.25}
 
 
