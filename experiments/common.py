@@ -175,6 +175,10 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
             if _data_key(study) not in loaded:
                 loaded[_data_key(study)] = load_data(study, args.clip_actions)
         data = [loaded[_data_key(s)] for s in studies]
+        for study, ds in zip(studies, data):
+            if study.batch_size > len(ds):
+                raise UsageError(f"--batch-size {study.batch_size} is larger than the dataset ({len(ds):,} "
+                                 f"transitions of {study.dataset})")
         if replace:
             shutil.rmtree(out)
         if isinstance(built, list) and args.resume is None:

@@ -61,6 +61,15 @@ def test_bad_input_is_one_line_and_writes_nothing(tmp_path, args, message):
     assert not out.exists()
 
 
+def test_a_batch_larger_than_the_dataset_is_refused_before_anything_is_written(tmp_path, tiny_hdf5):
+    out = tmp_path / "out"
+    result = cli("--dataset-path", tiny_hdf5, "--out", out, "--batch-size", "5000", "--updates", "400",
+                 "--pretrain-updates", "200", "--eval-every", "100", timeout=120)
+    assert result.returncode == 2 and result.stderr.strip().splitlines()[-1] == (
+        f"error: --batch-size 5000 is larger than the dataset (3,000 transitions of {tiny_hdf5})")
+    assert not out.exists()
+
+
 def test_existing_output_is_never_overwritten(tmp_path, tiny_hdf5):
     out = tmp_path / "run"
     out.mkdir()
