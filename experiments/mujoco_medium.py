@@ -1,7 +1,7 @@
 """The paper's central claim on D4RL-style MuJoCo data: offline RL with actor+critic pre-training versus without.
 
 Default (no arguments): hopper-medium (regenerated from the shipped behaviour policy and cached), TD3+BC with
-actor+critic pre-training (10k updates) vs from scratch, 3 vmapped seeds, 60k updates each (pre-training included),
+actor+critic pre-training (10k updates) vs from scratch, 3 vmapped seeds, 70k updates each (pre-training included),
 evaluated every 5k updates (10 episodes, deterministic policy, D4RL-normalised); the two variants train at once
 (`--parallel 2`).  TD3+BC's alpha is 2.5 here (TD3+BC's published default, with which the from-scratch baseline
 learns on this data); the paper's per-env alphas (hopper 10) come with `--preset authors` or `--alpha 10`.
@@ -179,7 +179,7 @@ def make_study(env: str, algo: str, level: str, args, extra: dict | None = None,
 
 
 def make_parser():
-    return parser(updates=60_000, preset=True)
+    return parser(updates=70_000, preset=True)
 
 
 def main(argv=None) -> int:

@@ -17,7 +17,7 @@ def labels(study):
 def test_main_job_default():
     (study,) = build(mujoco_medium, [])
     assert study.dataset == "hopper-medium" and labels(study) == ["pretrained", "scratch"]
-    assert study.reference == "scratch" and study.seeds == (0, 1, 2) and study.updates == 60_000
+    assert study.reference == "scratch" and study.seeds == (0, 1, 2) and study.updates == 70_000
     assert dict(study.variants[0].overrides)["pretrain"] == "actor+critic"
 
 
