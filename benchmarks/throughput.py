@@ -189,18 +189,17 @@ def time_case(case: Case, seeds: int, data: dict[str, jax.Array], all_states, pe
 
     seed_ids = tuple(range(seeds))
     states = jax.tree.map(lambda x: jnp.array(x[:seeds], copy=True), all_states)  # own buffers: donated
-    keys = seed_keys(seed_ids, CHUNK, 0)
+    keys = seed_keys(seed_ids, CHUNK)
     sharding, replicated = seed_sharding(seeds)  # as `Driver` places them: the seed axis split over the devices
     states, keys = jax.device_put(states, sharding), jax.device_put(keys, sharding)
     data = jax.device_put(data, replicated)
     tic = time.perf_counter()
-    compiled = make_chunk_fn(phase, BATCH, calls).lower(states, data, keys).compile()
+    compiled = make_chunk_fn(phase, BATCH, calls).lower(states, data, keys, jnp.int32(0)).compile()
     compile_s = time.perf_counter() - tic
 
     def run_chunk(states, index):
-        k = jax.device_put(seed_keys(seed_ids, CHUNK, index), sharding)
         tic = time.perf_counter()
-        states, metrics = compiled(states, data, k)
+        states, metrics = compiled(states, data, keys, jnp.int32(index * calls * phase.updates_per_call))
         jax.block_until_ready((states, metrics))
         return states, time.perf_counter() - tic, bool(np.all(metrics["finite"]))
 

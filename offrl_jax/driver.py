@@ -1,8 +1,10 @@
 """The training driver: a run is a list of phases; between evaluations it runs K updates as one jitted `lax.scan`,
 sampling minibatches on the device inside the scan, for S seeds at once with `jax.vmap` over the whole agent state.
 
-Randomness is a pure function of (seed, global update index), so seed i of a vmapped run equals a single run with
-seed i, and a resumed run continues exactly where it stopped.
+Randomness is a pure function of (seed, global update index): the key of the update call at update u is
+fold_in(fold_in(PRNGKey(seed), CHUNK), u), drawn inside the scan.  So how the updates are cut into chunks (the
+evaluation interval, a resume, a self-ending phase's windows) does not change training, and seed i of a vmapped run
+is a single run with seed i (up to the float rounding of batched matmuls, bounded in tests/test_driver.py).
 
 A hyper-parameter sweep (`Driver(..., sweep=("alpha", (1.0, 2.5, 10.0)))`) runs every (value, seed) pair as one
 member of the same vmapped program: the members' axis is value-major (member j * S + i = value j, seed i), each member
@@ -44,9 +46,10 @@ def device_data(ds: Dataset, gamma: float, timeout_tail: bool = True) -> tuple[d
     return data, (mean, std)
 
 
-def seed_keys(seeds: tuple[int, ...], stream: int, index: int) -> jax.Array:
-    """(S, 2) keys: fold_in(fold_in(PRNGKey(seed), stream), index) for every seed."""
-    return jnp.stack([jax.random.fold_in(jax.random.fold_in(jax.random.PRNGKey(s), stream), index) for s in seeds])
+def seed_keys(seeds: tuple[int, ...], stream: int, index: int | None = None) -> jax.Array:
+    """(S, 2) keys: fold_in(PRNGKey(seed), stream), then fold_in(., index) unless index is None, for every seed."""
+    keys = [jax.random.fold_in(jax.random.PRNGKey(s), stream) for s in seeds]
+    return jnp.stack(keys if index is None else [jax.random.fold_in(k, index) for k in keys])
 
 
 INIT, CHUNK, PHASE_START = 0, 1, 2  # key streams
@@ -69,39 +72,44 @@ def check_call_grid(phases: list[Phase], chunk_updates: int) -> None:
 
 def make_chunk_fn(phase: Phase, batch_size: int, num_calls: int,
                   phase_for: Callable[[dict[str, jax.Array]], Phase] | None = None) -> Callable:
-    """jit(vmap(scan of `num_calls` update calls)): (states (S..), data, keys (S, 2)) -> (states, metrics (S, ...)).
+    """jit(vmap(scan of `num_calls` update calls)):
+    (states (S..), data, keys (S, 2), start update ()) -> (states, metrics (S, ...)).
 
-    With `phase_for` (a sweep: hyper-parameters -> the phase built with them) the function takes a 4th argument,
-    hparams: {name: (S,) values}, and member m runs `phase_for({name: value_m})`.
+    `keys` are the members' run keys (`seed_keys(seeds, CHUNK)`); the call at global update u uses fold_in(key, u),
+    so the result does not depend on where chunks begin.  With `phase_for` (a sweep: hyper-parameters -> the phase
+    built with them) the function takes a 5th argument, hparams: {name: (S,) values}, and member m runs
+    `phase_for({name: value_m})`.
     """
 
-    def one_seed(state, data, key, hparams):
+    def one_seed(state, data, key, start, hparams):
         member_phase = phase if phase_for is None else phase_for(hparams)
         rows = data.get("rows")  # the rows that may be sampled, when some are excluded (timeouts="drop")
         n = data["rewards"].shape[0] if rows is None else rows.shape[0]
 
-        def body(state, key):
-            k_idx, k_update = jax.random.split(key)
+        def body(state, update):
+            k_idx, k_update = jax.random.split(jax.random.fold_in(key, update))
             idx = jax.random.randint(k_idx, (member_phase.updates_per_call, batch_size), 0, n)
             idx = idx if rows is None else rows[idx]
             batch = {k: data[k][idx] for k in DATA_FIELDS} | {"idx": idx}
             return member_phase.update(state, batch, k_update)
 
-        state, metrics = jax.lax.scan(body, state, jax.random.split(key, num_calls))
+        updates = start + member_phase.updates_per_call * jnp.arange(num_calls, dtype=jnp.int32)
+        state, metrics = jax.lax.scan(body, state, updates)
         finite = jnp.all(jnp.stack([jnp.all(jnp.isfinite(m)) for m in jax.tree.leaves(metrics)]))
         finite &= jnp.all(jnp.stack([jnp.all(jnp.isfinite(p)) for p in jax.tree.leaves(state)]))
         return state, jax.tree.map(lambda m: jnp.mean(m, axis=0), metrics) | {"finite": finite}
 
     if phase_for is None:
-        return jax.jit(vmap_members(lambda s, d, k: one_seed(s, d, k, None), in_axes=(0, None, 0)), donate_argnums=0)
-    return jax.jit(vmap_members(one_seed, in_axes=(0, None, 0, 0)), donate_argnums=0)
+        return jax.jit(vmap_members(lambda s, d, k, u: one_seed(s, d, k, u, None), in_axes=(0, None, 0, None)),
+                       donate_argnums=0)
+    return jax.jit(vmap_members(one_seed, in_axes=(0, None, 0, None, 0)), donate_argnums=0)
 
 
 def vmap_members(fn: Callable, in_axes: tuple) -> Callable:
     """`jax.vmap(fn, in_axes)`, except that one member runs `fn` itself on the squeezed arguments.
 
-    A vmap over an axis of size 1 is not free on XLA CPU: batched matmuls and batch-axis reductions cost ~25 % more
-    than the plain ones (TD3+BC, one core: 104 vs 133 updates/s, benchmarks/README).  Same results either way.
+    A vmap over an axis of size 1 is not free on XLA CPU: batched matmuls and batch-axis reductions are slower than
+    the plain ones (measured in benchmarks/README.md).  The same results either way, up to float rounding.
     """
     vmapped = jax.vmap(fn, in_axes=in_axes)
 
@@ -159,6 +167,7 @@ class Driver:
         if sweep:
             per_member = np.repeat(np.asarray(values, np.float32), len(self.seeds))
             self.hparams = jax.device_put({sweep[0]: jnp.asarray(per_member)}, self.seed_axis)
+        self.run_keys = jax.device_put(seed_keys(self.members, CHUNK), self.seed_axis)
         self._chunk_fns: dict[tuple[str, int], Callable] = {}
 
     def init(self) -> Any:
@@ -221,8 +230,8 @@ class Driver:
                     n = min(n, auto.window - update % auto.window)
                 calls = max(1, n // phase.updates_per_call)
                 tic = time.perf_counter()
-                keys = jax.device_put(seed_keys(self.members, CHUNK, update), self.seed_axis)
-                states, metrics = self._chunk_fn(phase, calls, phase_for)(states, self.data, keys, *extra)
+                states, metrics = self._chunk_fn(phase, calls, phase_for)(states, self.data, self.run_keys,
+                                                                          jnp.int32(update), *extra)
                 metrics = jax.tree.map(np.asarray, metrics)
                 elapsed = time.perf_counter() - tic
                 seconds += elapsed

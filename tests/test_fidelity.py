@@ -61,7 +61,7 @@ def test_timeouts_drop_never_samples_a_timeout_row():
         return state, {"timeout_rows": jnp.sum(batch["timeouts"]), "rows_seen": jnp.sum(batch["idx"] % 5 == 4)}
 
     fn = make_chunk_fn(Phase("probe", update, 100), batch_size=64, num_calls=100)
-    _, metrics = fn(jnp.zeros((1,)), data, jax.random.split(jax.random.PRNGKey(0), 1))
+    _, metrics = fn(jnp.zeros((1,)), data, jax.random.split(jax.random.PRNGKey(0), 1), jnp.int32(0))
     assert float(metrics["timeout_rows"][0]) == 0 and float(metrics["rows_seen"][0]) == 0
 
 
