@@ -2,7 +2,9 @@
 between scan chunks, with atomic results, checkpoints every N updates, `resume`, and a clean stop on divergence.
 
 Output directory:
-    config.json      the study (enough to resume it)
+    config.json      the study (enough to resume or replay it), every variant's resolved config ("resolved": every
+                     field after per-env defaults and presets), and one record per start or resume ("runs": command,
+                     git commit, versions, backend, dataset fingerprint; `offrl_jax.provenance`)
     curves.csv       variant, seed, phase, update, seconds, score, every logged metric; `seconds` is the variant's
                      training wall-clock so far: its jitted chunks including their XLA compilation, excluding the
                      evaluations (so a run stopped with SIGSTOP, or sharing its core, shows longer seconds)
@@ -34,6 +36,7 @@ from offrl_jax.data.dataset import Dataset
 from offrl_jax.driver import Driver, check_call_grid, device_data
 from offrl_jax.envs import get_env_spec
 from offrl_jax.evaluate import evaluate_normalized, make_policy
+from offrl_jax.provenance import run_record
 
 
 class Diverged(RuntimeError):
@@ -63,7 +66,7 @@ class Study:
     eval_episodes: int = 10
     batch_size: int = 256
     checkpoint_every: int = 0  # 0 = at every evaluation
-    transitions: int | None = None  # cap the dataset size (quick runs, tests)
+    max_transitions: int | None = None  # train on the first N transitions only (quick runs, tests); never cached
     clip_actions: bool = False  # clip out-of-bounds dataset actions (with a warning) instead of refusing the data
     reference: str | None = None  # label of the from-scratch variant whose final score is the asymptote (None: no
     # asymptote, and no updates/seconds to 90 %)
@@ -92,9 +95,25 @@ class Study:
     def to_json(self) -> str:
         return json.dumps(dataclasses.asdict(self), indent=2)
 
+    def resolved(self) -> dict[str, dict[str, Any]]:
+        """{label: every field of the variant's algorithm config, after per-env defaults, preset and overrides}."""
+        return {v.label: dataclasses.asdict(make_config(v.algo, self.env, self.dataset, **dict(v.overrides)))
+                for v in self.variants}
+
+    def record_json(self, ds: Dataset | None = None, previous: str | None = None) -> str:
+        """config.json: the study, its resolved configs, and the run records so far plus this one."""
+        runs = json.loads(previous).get("runs", []) if previous else []
+        raw = dataclasses.asdict(self) | {"resolved": self.resolved(),
+                                          "runs": runs + [run_record(ds, self.dataset)]}
+        return json.dumps(raw, indent=2, default=list) + "\n"
+
     @staticmethod
     def from_json(text: str) -> Study:
         raw = json.loads(text)
+        for recorded in ("resolved", "runs"):  # what the run wrote about itself; the study is the rest
+            raw.pop(recorded, None)
+        if "transitions" in raw:  # runs saved before the cap was renamed
+            raw["max_transitions"] = raw.pop("transitions")
         value = lambda x: tuple(x) if isinstance(x, list) else x  # noqa: E731  JSON has lists; configs use tuples
         raw["variants"] = tuple(Variant(v["label"], v["algo"], tuple((k, value(x)) for k, x in v["overrides"]))
                                 for v in raw["variants"])
@@ -114,8 +133,9 @@ def run_study(study: Study, out_dir: Path, dataset: Dataset, resume: bool = Fals
     its own).
     """
     out_dir.mkdir(parents=True, exist_ok=True)
-    if not resume or not (out_dir / "config.json").exists():  # a resumed multi-study run may not have begun it
-        atomic_write_text(out_dir / "config.json", study.to_json())
+    config_path = out_dir / "config.json"  # a resumed multi-study run may not have begun this study yet
+    previous = config_path.read_text() if resume and config_path.exists() else None
+    atomic_write_text(config_path, study.record_json(dataset, previous))
     bar = tqdm(total=len(study.variants) * study.updates, disable=not progress, unit="upd", dynamic_ncols=True,
                file=sys.stderr)
     recorder = _Recorder(out_dir / "curves.csv", [v.label for v in study.variants])
@@ -347,7 +367,8 @@ def merge_runs(run_dirs: list[Path], out_dir: Path) -> list[dict]:
     ends = pretrain_ends_of(rows)
     summary = summarize(study, rows, ends)
     out_dir.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out_dir / "config.json", study.to_json())
+    records = [r for d in run_dirs for r in json.loads((d / "config.json").read_text()).get("runs", [])]
+    atomic_write_text(out_dir / "config.json", study.record_json(previous=json.dumps({"runs": records})))
     write_curves(out_dir / "curves.csv", rows)
     atomic_write_text(out_dir / "summary.json", summary_json(summary))
     plot_curves(out_dir / "curves.png", study, rows, ends)
@@ -454,6 +475,7 @@ def _summarize(study: Study, rows: list[dict], pretrain_ends: dict[str, int]) ->
             # seeds whose final score is not finite (diverged and stopped): the mean and CI above leave them out
             "seeds_diverged": [seed for seed, f in zip(study.seeds, finals[v.label]) if not np.isfinite(f)],
             "overrides": dict(v.overrides),
+            "config": dataclasses.asdict(config),
         })
     return summary
 
