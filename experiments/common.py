@@ -8,6 +8,7 @@ from the last complete checkpoints.  Bad input -> `error: ...` on stderr, exit 2
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import shutil
 import sys
@@ -19,7 +20,7 @@ from offrl_jax import datasets
 from offrl_jax.checkpoint import atomic_write_text
 from offrl_jax.cli import OneLineParser  # noqa: F401  (re-exported: the studies import it from here)
 from offrl_jax.data.dataset import DatasetError
-from offrl_jax.runner import Diverged, Study, print_table, run_study
+from offrl_jax.runner import Diverged, Study, Variant, print_table, run_study
 
 
 class UsageError(ValueError):
@@ -55,14 +56,21 @@ def run_args(parser: argparse.ArgumentParser, updates: int | None, eval_every: i
     g.add_argument("--batch-size", type=positive_int, default=256)
     g.add_argument("--checkpoint-every", type=int, default=0, help="updates between checkpoints (0: every evaluation)")
     g.add_argument("--dataset-path", default=None, help="a D4RL .hdf5, Minari directory or id, or .npz to use instead")
-    g.add_argument("--transitions", type=positive_int, default=None, help="cap the dataset at N transitions")
+    g.add_argument("--max-transitions", "--transitions", dest="max_transitions", type=positive_int, default=None,
+                   help="train on the first N transitions only (a dataset not cached yet is generated at that size "
+                        "for this run, and not cached)")
     g.add_argument("--clip-actions", action="store_true", help="clip out-of-bounds dataset actions (with a warning)")
     g.add_argument("--out", type=Path, default=None, help="output directory (default: runs/<study>/<timestamp>)")
     g.add_argument("--overwrite", action="store_true",
                    help="replace the earlier run in --out (only a directory whose config.json is a saved study)")
     g.add_argument("--resume", type=Path, default=None,
-                   help="continue the run saved in this directory with the settings saved there: only --parallel, "
-                        "--no-progress (and --clip-actions, for runs saved before it was recorded) are read")
+                   help="continue the run saved in this directory with the settings saved there; --updates N "
+                        "larger than the saved budget extends it, --parallel and --no-progress may change; any "
+                        "other flag is refused")
+    g.add_argument("--config", type=Path, default=None,
+                   help="re-run the run saved in this config.json (or run directory) exactly, into a new --out; "
+                        "run flags and single-valued hyper-parameter flags given with it change that one value "
+                        "(for every variant)")
     g.add_argument("--parallel", type=positive_int, default=2,
                    help="variants trained at once, in threads (default %(default)s: one XLA program at these sizes "
                         "keeps about one CPU core busy); 1 = one after another")
@@ -112,7 +120,8 @@ def study_fields(args) -> dict:
     """Study fields from the run flags (a study without --updates / --eval-every sets those itself)."""
     fields = dict(seeds=tuple(range(args.seed_offset, args.seed_offset + args.seeds)),
                   eval_episodes=args.eval_episodes, batch_size=args.batch_size,
-                  checkpoint_every=args.checkpoint_every, transitions=args.transitions, clip_actions=args.clip_actions)
+                  checkpoint_every=args.checkpoint_every, max_transitions=args.max_transitions,
+                  clip_actions=args.clip_actions)
     return fields | {k: getattr(args, k) for k in ("updates", "eval_every") if hasattr(args, k)}
 
 
@@ -121,9 +130,9 @@ def studies_json(studies: list[Study]) -> str:
     return json.dumps({"studies": [json.loads(s.to_json()) for s in studies]}, indent=2) + "\n"
 
 
-def saved_studies(out: Path) -> Study | list[Study]:
-    """The study (or studies) a run directory was started with, from its config.json."""
-    path = out / "config.json"
+def saved_studies(out: Path, path: Path | None = None) -> Study | list[Study]:
+    """The study (or studies) a run directory was started with, from its config.json (or `path`)."""
+    path = path or out / "config.json"
     try:
         raw = json.loads(path.read_text())
         if "studies" not in raw:
@@ -147,28 +156,103 @@ def load_data(study: Study, clip_actions: bool = False):
     """The study's dataset (`clip_actions`: also clip, for a resumed run saved before studies recorded it)."""
     source = study.dataset
     clip = study.clip_actions or clip_actions or None
-    ds = datasets.load(source, transitions=study.transitions, clip_actions=clip, env=study.env)
-    if study.transitions and len(ds) > study.transitions:
-        ds = ds.select(slice(0, study.transitions))
+    ds = datasets.load(source, max_transitions=study.max_transitions, clip_actions=clip, env=study.env)
     if ds.env is not None and ds.env != study.env:
         raise UsageError(f"{source}: dataset is for env '{ds.env}', not '{study.env}'")
     return ds
 
 
 def _data_key(study: Study) -> tuple:
-    return study.dataset, study.env, study.transitions, study.clip_actions
+    return study.dataset, study.env, study.max_transitions, study.clip_actions
+
+
+_UNSET = object()
+RESUME_FLAGS = frozenset({"resume", "updates", "parallel", "no_progress", "clip_actions"})
+# run flag destination -> the Study field it sets (seeds and --dataset-path are mapped in `replay`)
+RUN_FIELDS = ("updates", "eval_every", "eval_episodes", "batch_size", "checkpoint_every", "max_transitions",
+              "clip_actions")
+REPLAY_FLAGS = frozenset({"config", "out", "overwrite", "parallel", "no_progress", "seeds", "seed_offset",
+                          "dataset_path", *RUN_FIELDS})
+
+
+def given_dests(parser: argparse.ArgumentParser, argv=None) -> set[str]:
+    """The destinations of the flags typed on the command line (typed with their default value too)."""
+    probe = argparse.Namespace(**{a.dest: _UNSET for a in parser._actions if a.dest != argparse.SUPPRESS})
+    parser.parse_args(sys.argv[1:] if argv is None else argv, probe)
+    return {dest for dest, value in vars(probe).items() if value is not _UNSET}
+
+
+def _flags(parser: argparse.ArgumentParser, dests) -> str:
+    names = {a.dest: a.option_strings[0] for a in parser._actions if a.option_strings}
+    return ", ".join(names.get(d, d) for d in sorted(dests))
+
+
+def extend(saved: Study | list[Study], updates: int) -> Study | list[Study]:
+    """The saved study (or studies) with a larger budget: --resume --updates N continues a run past its end."""
+    studies = saved if isinstance(saved, list) else [saved]
+    if any(updates < s.updates for s in studies):
+        raise UsageError(f"--updates {updates:,} is less than the saved run's {max(s.updates for s in studies):,}; "
+                         "a resumed run can be extended, not shortened")
+    longer = [dataclasses.replace(s, updates=updates) for s in studies]
+    return longer if isinstance(saved, list) else longer[0]
+
+
+def replay(saved: Study | list[Study], args, given: set[str], hparams: dict) -> Study | list[Study]:
+    """The saved study (or studies) with the run flags in `given` and the hyper-parameters `hparams` replaced."""
+    swept = sorted(k for k, v in hparams.items() if isinstance(v, (list, tuple)) and k != "hidden")
+    if swept:
+        raise UsageError(f"--config takes one value per hyper-parameter (got several for {', '.join(swept)}); "
+                         "start a new run to sweep")
+    fields = {f: getattr(args, f) for f in RUN_FIELDS if f in given}
+    if given & {"seeds", "seed_offset"}:
+        fields["seeds"] = tuple(range(args.seed_offset, args.seed_offset + args.seeds))
+    if "dataset_path" in given:
+        fields["dataset"] = str(args.dataset_path)
+
+    def one(study: Study) -> Study:
+        variants = tuple(Variant.of(v.label, v.algo, **(dict(v.overrides) | hparams)) for v in study.variants)
+        return dataclasses.replace(study, variants=variants, **fields)
+
+    return [one(s) for s in saved] if isinstance(saved, list) else one(saved)
 
 
 def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parser: argparse.ArgumentParser,
-               argv=None) -> int:
-    """Parse, build the study (or studies: each in its own sub-directory), run; expected failures are one line."""
+               argv=None, hparams: Callable[[argparse.Namespace], dict] | None = None,
+               hparam_dests: frozenset[str] = frozenset()) -> int:
+    """Parse, build the study (or studies: each in its own sub-directory), run; expected failures are one line.
+
+    For --config: `hparam_dests` are the flags that set single hyper-parameters, and `hparams(args)` the overrides
+    they make ({config field: value}, None for a flag not given)."""
     args = parser.parse_args(argv)
     out, replace = None, False
     try:
-        built = None if args.resume is not None else build(args)  # validates every hyper-parameter and budget
+        given = given_dests(parser, argv)
+        if args.resume is not None and args.config is not None:
+            raise UsageError("--resume and --config exclude each other: --resume continues a run in place, "
+                             "--config starts a new one from its settings")
+        if args.resume is not None and given - RESUME_FLAGS:
+            raise UsageError(f"--resume continues {args.resume} with its saved settings, so "
+                             f"{_flags(parser, given - RESUME_FLAGS)} cannot change (only --updates, to extend it); "
+                             f"to change settings start a new run with --config {args.resume}")
+        if args.config is not None:
+            if not args.config.exists():
+                raise UsageError(f"{args.config}: no such file or directory")
+            unknown = given - REPLAY_FLAGS - hparam_dests
+            if unknown:
+                raise UsageError(f"--config keeps the saved run's variants, so {_flags(parser, unknown)} cannot be "
+                                 "given with it")
+            typed = {k: v for k, v in hparams(args).items() if v is not None} if hparams else {}
+            path = args.config / "config.json" if args.config.is_dir() else args.config
+            built = replay(saved_studies(path.parent, path), args, given, typed)
+        elif args.resume is None:
+            built = build(args)  # validates every hyper-parameter and budget
         out, replace = output_dir(args, parser.prog.split(".")[-1])
         if args.resume is not None:
             built = saved_studies(out)
+            if "updates" in given:
+                built = extend(built, args.updates)
+                if isinstance(built, list):
+                    atomic_write_text(out / "config.json", studies_json(built))
         studies = built if isinstance(built, list) else [built]
         loaded: dict = {}  # bad data fails here, before anything is written; each dataset is loaded once
         for study in studies:

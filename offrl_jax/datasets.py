@@ -16,6 +16,7 @@ import dataclasses
 import json
 import os
 import sys
+import tempfile
 import warnings
 from pathlib import Path
 
@@ -82,51 +83,64 @@ def generate(name: str, *, transitions: int | None = None, out_dir=None, seed: i
 
 
 def _generation_cap(path: Path) -> int | None:
-    """The `--transitions` cap a generated dataset was made with (None: full size, or not recorded)."""
+    """The `generate --transitions` cap a cached dataset was made with (None: full size, or not recorded)."""
     try:
         return json.loads((Path(path) / "offrl_jax.json").read_text()).get("transitions_cap")
     except (OSError, ValueError):
         return None
 
 
-def _load_generated(name: str, transitions, clip_actions, generate_if_missing: bool) -> Dataset:
+def _load_generated(name: str, max_transitions, clip_actions, generate_if_missing: bool) -> Dataset:
+    """A generated dataset from the cache (generated in full first if missing).  With `max_transitions` and no cached
+    copy, only that many transitions are generated, into a temporary directory that is deleted after reading: a
+    capped run never writes the cache, so the name always stands for the full dataset."""
     path = cached_path(name)
+    kw = {} if clip_actions is None else {"clip_actions": clip_actions}
     if not is_cached(name):
         if not generate_if_missing:
             raise DatasetError(f"{path}: '{name}' is not generated yet; run: python -m offrl_jax.datasets generate "
                                f"{name}")
-        path = generate(name, transitions=transitions)
-    kw = {} if clip_actions is None else {"clip_actions": clip_actions}
+        if max_transitions is not None:
+            print(f"{name} is not cached: generating only the {max_transitions:,} transitions this run uses, not "
+                  f"cached (python -m offrl_jax.datasets generate {name} caches the full dataset)", file=sys.stderr)
+            with tempfile.TemporaryDirectory(prefix=f"offrl-{name}-") as tmp:
+                ds = read_minari(generate(name, transitions=max_transitions, out_dir=Path(tmp) / name),
+                                 env=get_env_spec(name).name, **kw)
+            return dataclasses.replace(ds, name=name)
+        path = generate(name)
     ds = read_minari(path, env=get_env_spec(name).name, **kw)
-    if transitions is not None and len(ds) != transitions:
-        warnings.warn(f"{path}: cached '{name}' has {len(ds)} transitions, not the {transitions} asked for; "
-                      "delete the directory to generate it again", stacklevel=3)
-    elif transitions is None and _generation_cap(path) is not None:  # a quick --transitions run cached a small one
+    if _generation_cap(path) is not None:  # cached capped by `datasets generate --transitions`
         warnings.warn(f"{path}: cached '{name}' was generated capped at {_generation_cap(path):,} transitions "
-                      "(--transitions), not at full size; delete the directory to generate it in full", stacklevel=3)
+                      "(datasets generate --transitions), not at full size; delete the directory to generate it in "
+                      "full", stacklevel=3)
     return dataclasses.replace(ds, name=name)
 
 
-def load(name_or_path, *, transitions: int | None = None, clip_actions: bool | None = None,
+def load(name_or_path, *, max_transitions: int | None = None, clip_actions: bool | None = None,
          generate_if_missing: bool = True, env: str | None = None) -> Dataset:
     """A validated `Dataset` from a known name (see `KNOWN`) or a path / Minari id (see `load_dataset_path`).
 
-    transitions: size to generate when a generated name is not cached yet (None: the generator's default).
+    max_transitions: use only the first N transitions; a generated name that is not cached is then generated at
+      that size for this call only, never into the cache.
     clip_actions: clip out-of-range actions with a warning instead of failing; None: the reader's default (True
       for the door human demonstrations, whose out-of-range values the env clips anyway; False otherwise).
     env: the env the data must fit (a file's observation/action dims and action bounds are checked against it).
     """
     name = str(name_or_path)
+    if max_transitions is not None and max_transitions <= 0:
+        raise DatasetError(f"max_transitions = {max_transitions} must be positive")
     if name in SHARED_NAMES:
         kw = {} if clip_actions is None else {"clip_actions": clip_actions}
-        return dataclasses.replace(read_door_npz(door_human_path(), **kw), name=name)
-    if name in KNOWN:
-        return _load_generated(name, transitions, clip_actions, generate_if_missing)
-    looks_like_path = (Path(name).exists() or Path(name).suffix.lower() in (".hdf5", ".h5", ".npz") or "/" in name
-                       or (minari_root() / name).is_dir())
-    if not looks_like_path:
-        raise _unknown(name)
-    return load_dataset_path(name, env=env, clip_actions=clip_actions)
+        ds = dataclasses.replace(read_door_npz(door_human_path(), **kw), name=name)
+    elif name in KNOWN:
+        ds = _load_generated(name, max_transitions, clip_actions, generate_if_missing)
+    else:
+        looks_like_path = (Path(name).exists() or Path(name).suffix.lower() in (".hdf5", ".h5", ".npz")
+                           or "/" in name or (minari_root() / name).is_dir())
+        if not looks_like_path:
+            raise _unknown(name)
+        ds = load_dataset_path(name, env=env, clip_actions=clip_actions)
+    return ds if max_transitions is None or len(ds) <= max_transitions else ds.select(slice(0, max_transitions))
 
 
 def summary(ds: Dataset) -> dict:
@@ -161,7 +175,8 @@ def _parser() -> argparse.ArgumentParser:
     gen = sub.add_parser("generate", help="generate a known dataset into the cache (or --out)")
     gen.add_argument("name", help="a generated name from `list` (e.g. hopper-medium, walker2d-expert, door-cloned)")
     gen.add_argument("--transitions", type=int, default=None,
-                     help="cap on the number of transitions (default: 1M per policy; the whole run for replay levels)")
+                     help="cap on the number of transitions (default: 1M per policy; the whole run for replay "
+                          "levels); a capped dataset in the cache is reported as such whenever it is loaded")
     gen.add_argument("--out", type=Path, default=None, help="dataset directory (default: the cache, see `list`)")
     gen.add_argument("--seed", type=int, default=0, help="seed of the rollouts (envs and action noise)")
     return parser

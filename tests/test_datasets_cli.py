@@ -85,7 +85,7 @@ def test_load_generates_once_then_reads_cache(tmp_path, monkeypatch):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             ds = minari.create_dataset_from_buffers(f"gen/{name}-v0", buffer, env=gym.spec("Hopper-v5"))
-        out = datasets.cached_path(name)
+        out = Path(out_dir) if out_dir is not None else datasets.cached_path(name)
         out.parent.mkdir(parents=True, exist_ok=True)
         Path(ds.storage.data_path).parent.rename(out)
         return out
@@ -93,17 +93,26 @@ def test_load_generates_once_then_reads_cache(tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "offrl_jax.data.generate", types.SimpleNamespace(generate=fake_generate))
     with pytest.raises(DatasetError, match="not generated yet"):
         datasets.load("hopper-medium", generate_if_missing=False)
-    ds = datasets.load("hopper-medium", transitions=30)
-    assert (len(ds), ds.env, ds.name) == (30, "hopper", "hopper-medium") and calls == [("hopper-medium", 30, None, 0)]
-    assert len(datasets.load("hopper-medium")) == 30 and len(calls) == 1
-    assert datasets.is_cached("hopper-medium") and not datasets.is_cached("hopper-expert")
+    # a capped load of a dataset that is not cached generates just that many transitions, and not into the cache
+    ds = datasets.load("hopper-medium", max_transitions=30)
+    assert (len(ds), ds.env, ds.name) == (30, "hopper", "hopper-medium") and len(calls) == 1
+    assert calls[0][1] == 30 and calls[0][2] is not None and not Path(calls[0][2]).exists()  # a deleted temporary
+    assert not datasets.is_cached("hopper-medium")
+    # a full load generates into the cache; a capped load then takes the first rows of the cached one
+    T = 40
+    calls.clear()
+    monkeypatch.setitem(sys.modules, "offrl_jax.data.generate", types.SimpleNamespace(
+        generate=lambda name, transitions=None, out_dir=None, seed=0: fake_generate(name, T, out_dir, seed)))
+    assert len(datasets.load("hopper-medium")) == 40 and datasets.is_cached("hopper-medium")
+    assert len(datasets.load("hopper-medium", max_transitions=30)) == 30 and len(calls) == 1
+    assert not datasets.is_cached("hopper-expert")
 
 
 def test_load_without_generator(tmp_path, monkeypatch):
     monkeypatch.setenv("OFFRL_JAX_CACHE", str(tmp_path))
     monkeypatch.setitem(sys.modules, "offrl_jax.data.generate", None)  # import fails
     with pytest.raises(DatasetError, match="generator is not available"):
-        datasets.load("walker2d-random", transitions=10)
+        datasets.load("walker2d-random", max_transitions=10)
 
 
 def test_load_path(tmp_path):

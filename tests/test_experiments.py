@@ -161,3 +161,34 @@ def test_vmapped_alpha_sweep_equals_separate_runs(tmp_path, tiny_dataset):
         for key in ("score", "critic_loss", "actor_loss", "q_mean"):
             assert abs(float(a[key]) - float(b[key])) <= 1e-3 * (1 + abs(float(b[key]))), (key, a, b)
     assert [s["final_score_mean"] for s in together] == pytest.approx([s["final_score_mean"] for s in apart], abs=0.5)
+
+
+def test_config_replays_a_saved_run_and_resume_refuses_other_settings(tmp_path, tiny_hdf5):
+    """--config FILE re-runs a run exactly; --resume refuses changed settings (writing nothing) but extends
+    --updates from the last checkpoint, equal to a run made that long from the start."""
+    first, again, longer = tmp_path / "first", tmp_path / "again", tmp_path / "longer"
+    cli("--dataset-path", tiny_hdf5, "--out", first, *TINY, check=True, timeout=600)
+    result = cli("--config", first / "config.json", "--out", again, "--no-progress", timeout=600)
+    assert result.returncode == 0, result.stderr
+    assert curves_without_time(again / "curves.csv") == curves_without_time(first / "curves.csv")
+    before = {p.name: p.read_bytes() for p in first.iterdir() if p.is_file()}
+    for args, flag in ((["--hidden", "64"], "--hidden"), (["--out", tmp_path / "x"], "--out"),
+                       (["--alpha", "3"], "--alpha"), (["--updates", "200"], "less than")):
+        result = cli("--resume", first, *map(str, args), timeout=120)
+        assert result.returncode == 2 and flag in result.stderr.strip().splitlines()[-1], result.stderr
+        assert "Traceback" not in result.stderr
+    assert {p.name: p.read_bytes() for p in first.iterdir() if p.is_file()} == before  # nothing written
+    # a single value changed with --config: that run differs from the first only there
+    result = cli("--config", first, "--out", tmp_path / "alpha3", "--alpha", "3", "--no-progress", timeout=600)
+    assert result.returncode == 0, result.stderr
+    import json
+    resolved = json.loads((tmp_path / "alpha3" / "config.json").read_text())["resolved"]
+    assert {v["alpha"] for v in resolved.values()} == {3.0}
+    result = cli("--config", first, "--out", tmp_path / "bad", "--pretrain", "none", timeout=120)
+    assert result.returncode == 2 and "--pretrain" in result.stderr and not (tmp_path / "bad").exists()
+    # extend a finished run by 200 updates: the same as a 600-update run
+    result = cli("--resume", first, "--updates", "600", "--no-progress", timeout=600)
+    assert result.returncode == 0, result.stderr
+    cli("--dataset-path", tiny_hdf5, "--out", longer, *TINY[:1], "600", *TINY[2:], check=True, timeout=600)
+    assert curves_without_time(first / "curves.csv") == curves_without_time(longer / "curves.csv")
+    assert len(json.loads((first / "config.json").read_text())["runs"]) == 2  # the start and the extension
