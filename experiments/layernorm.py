@@ -29,7 +29,7 @@ def build(args):
 
 def make_parser():
     return parser("experiments.layernorm", __doc__, updates=20_000, eval_every=2_000, env=None,
-                  omit=("pretrain", "actor_ln", "critic_ln"))
+                  omit=("pretrain", "actor_layer_norm", "critic_layer_norm"))
 
 
 def main(argv=None) -> int:

@@ -17,8 +17,10 @@ See RESULTS.md for the measured wall-clock time and for what happens with longer
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 
+from experiments.flags import CONFIGS, NOT_FLAGS, add_config_flags, config_values, sweepable_fields
 from experiments.common import OneLineParser, UsageError, main_guard, positive_int, run_args, study_fields
 from offrl_jax.algos import ALGOS, PRESETS, preset_values
 from offrl_jax.algos.edac import EDACConfig
@@ -54,27 +56,6 @@ def parser(prog: str = "experiments.mujoco_medium", doc: str = __doc__, updates:
         help=f"N, or auto[:CAP] to end each pre-training phase when its supervised losses improve by less than 1 %% "
              f"per 1k updates (every seed; capped at CAP or the default; the rest goes to offline RL).  Default: "
              f"10k TD3+BC, {edac['pretrain_updates'] // 1000}k EDAC")
-    add("--lam", type=float, default=None, help="TD weight in critic pre-training (paper: 0 or 0.1)")
-    add("--lambda-mode", choices=("loss", "target"), default=None)
-    add("--actor-ln", action=argparse.BooleanOptionalAction, default=None, help="LayerNorm in the actor")
-    add("--critic-ln", action=argparse.BooleanOptionalAction, default=None, help="LayerNorm in the critic")
-    add("--ln-affine", action=argparse.BooleanOptionalAction, default=None,
-        help="learned LayerNorm scale/bias (default on; --no-ln-affine = the authors' code, faster)")
-    add("--alpha", type=float, nargs="+", default=None,
-        help="TD3+BC alpha (default: 2.5 in the main job without a preset, else per env: hopper 10, halfcheetah "
-             "20, walker2d 5); several values = a sweep, vmapped in one program")
-    add("--num-critics", type=positive_int, default=None, help=f"EDAC/SAC-N ensemble size (default: {num_critics})")
-    add("--eta", type=float, nargs="+", default=None,
-        help="EDAC diversity weight; several values = a sweep, vmapped in one program")
-    add("--actor-pretrain-fraction", type=float, default=None,
-        help="EDAC: share of --pretrain-updates spent on soft BC, the rest on the critic "
-             f"(default {edac['actor_pretrain_fraction']})")
-    add("--hidden", type=positive_int, nargs="+", default=None,
-        help="hidden layer widths (default per algo)")
-    add("--timeouts", choices=("bootstrap", "stop", "drop"), default=None,
-        help="TD target at a time-out: bootstrap (default), stop (the authors'), drop the row (CORL's loader)")
-    add("--actor-lr", type=float, default=None)
-    add("--critic-lr", type=float, default=None)
     help_authors = ("authors: the authors' code switch by switch (LayerNorm without scale/bias and eps 1e-5, "
                     "PyTorch init, a 3x256 TD3+BC actor, no bootstrap at time-outs, x/sg(x) loss balancing, the "
                     "paper's per-env alphas; docs/fidelity.md); flags given with it override single values")
@@ -85,6 +66,17 @@ def parser(prog: str = "experiments.mujoco_medium", doc: str = __doc__, updates:
                  "defaults are refused.  " + help_authors + ".  Both may be given")
     else:
         add("--preset", nargs=1, choices=tuple(PRESETS), default=None, help=help_authors)
+    add_config_flags(p, omit)
+    for action in p._actions:  # this study's defaults where they differ from the configs'
+        if action.dest == "num_critics":
+            action.help = f"EDAC/SAC-N ensemble size. Default: {num_critics}"
+        if action.dest == "actor_pretrain_fraction":
+            action.help = (f"EDAC: share of --pretrain-updates spent on soft BC, the rest on the critic. Default: "
+                           f"{edac['actor_pretrain_fraction']}")
+        if action.dest == "alpha" and preset:
+            action.help = (f"TD3+BC's actor regularisation. Default: {MAIN_JOB_ALPHA} without a preset, else per env "
+                           "(hopper 10, halfcheetah 20, walker2d 5); several values = a sweep, vmapped in one "
+                           "program")
     run_args(p, updates=updates, eval_every=eval_every)
     return p
 
@@ -97,21 +89,15 @@ def pretrain_budget(text: str) -> dict:
     return {"pretrain_updates": positive_int(text)}
 
 
-# flag destination -> config field
-OVERRIDES = {"lam": "lam", "lambda_mode": "lambda_mode", "actor_ln": "actor_layer_norm",
-             "critic_ln": "critic_layer_norm", "alpha": "alpha", "num_critics": "num_critics", "eta": "eta",
-             "actor_lr": "actor_lr", "critic_lr": "critic_lr",
-             "hidden": "hidden", "actor_pretrain_fraction": "actor_pretrain_fraction", "ln_affine": "layer_norm_affine",
-             "timeouts": "timeouts"}
+CONFIG_FIELDS = frozenset(name for cls in CONFIGS for name in (f.name for f in dataclasses.fields(cls))) - NOT_FLAGS
 
 
 def overrides(args) -> dict:
-    """Config overrides from the flags (None: not given; a study's omitted flags are None)."""
-    values = {field: getattr(args, dest, None) for dest, field in OVERRIDES.items()}
-    return values | {"hidden": tuple(values["hidden"]) if values["hidden"] else None} | (
-        getattr(args, "pretrain_updates", None) or {})
+    """Config overrides from the flags (a flag not given, or omitted by the study, is left out)."""
+    return config_values(args, CONFIG_FIELDS) | (getattr(args, "pretrain_updates", None) or {})
 
 
+HPARAM_DESTS = CONFIG_FIELDS | {"pretrain_updates"}  # the flags that set one hyper-parameter each
 PRESET_FIXED = ("env", "algo", "level", "updates", "eval_every")  # what --preset paper sets itself
 
 
@@ -132,14 +118,13 @@ def build(args) -> Study | list[Study]:
     return make_study(args.env, args.algo, args.level, args)
 
 
-SWEPT = ("alpha", "eta")  # flags that take several values
+SWEPT = tuple(sorted(sweepable_fields()))  # flags that take several values (a sweep)
 
 
 def given(args) -> dict:
     """The hyper-parameters set on the command line (the rest take the per-env defaults); a swept flag given one
     value is that value, given several it stays a list (see `sweep_variants`)."""
-    values = {k: v for k, v in overrides(args).items() if v is not None}
-    values = {k: (v[0] if k in SWEPT and len(v) == 1 else v) for k, v in values.items()}
+    values = overrides(args)
     config_presets = [p for p in getattr(args, "preset", None) or [] if p in PRESETS]
     return values | ({"preset": config_presets[0]} if config_presets else {})
 
@@ -183,7 +168,7 @@ def make_parser():
 
 
 def main(argv=None) -> int:
-    return main_guard(build, make_parser(), argv)
+    return main_guard(build, make_parser(), argv, hparams=given, hparam_dests=HPARAM_DESTS)
 
 
 if __name__ == "__main__":

@@ -1,5 +1,7 @@
 """docs/extending.md's examples run as written: its blocks marked "(tested: ...)" are executed here."""
+import importlib.util
 import re
+import sys
 from pathlib import Path
 
 import jax
@@ -13,15 +15,42 @@ DOC = Path(__file__).resolve().parents[1] / "docs" / "extending.md"
 
 
 @pytest.fixture
-def doc_namespace(monkeypatch):
+def doc_namespace(monkeypatch, tmp_path):
+    """Every tested block of the doc, each run as a module file of its own (so `inspect` finds its source)."""
     monkeypatch.setattr("offrl_jax.algos.ALGOS", dict(ALGOS))  # the registry example must not leak into other tests
     marker = "(tested: tests/test_extending.py)"
     blocks = [b for b in re.findall(r"```python\n(.*?)```", DOC.read_text(), re.S) if marker in b]
-    assert len(blocks) == 2
+    assert len(blocks) == 3
     namespace: dict = {}
-    for block in blocks:
-        exec(compile(block, str(DOC), "exec"), namespace)
+    for i, block in enumerate(blocks):
+        path = tmp_path / f"extending_block_{i}.py"
+        path.write_text(block)
+        spec = importlib.util.spec_from_file_location(path.stem, path)
+        module = importlib.util.module_from_spec(spec)
+        monkeypatch.setitem(sys.modules, path.stem, module)
+        spec.loader.exec_module(module)
+        namespace |= vars(module)
     return namespace
+
+
+def test_hyper_parameter_example_is_a_flag_with_its_comment_as_help(doc_namespace):
+    assert doc_namespace["args"].actor_grad_clip == 1.0
+    text = doc_namespace["parser"].format_help()
+    assert "--actor-grad-clip" in text and "clip the actor's gradient norm" in " ".join(text.split())
+
+
+def test_every_config_field_has_a_flag():
+    import dataclasses
+
+    from experiments.flags import NOT_FLAGS
+    from experiments.mujoco_medium import make_parser
+    from offrl_jax.algos import EDACConfig, TD3BCConfig
+
+    dests = {a.dest for a in make_parser()._actions}
+    for cls in (TD3BCConfig, EDACConfig):
+        for f in dataclasses.fields(cls):
+            assert f.name in dests or f.name in NOT_FLAGS or f.name == "pretrain_auto", f.name
+    assert {"pretrain", "pretrain_updates"} <= dests  # the study's own flags for those
 
 
 def test_registry_example_makes_a_checked_config(doc_namespace):

@@ -49,17 +49,17 @@ from offrl_jax.nets import (
 
 @dataclasses.dataclass(frozen=True)
 class EDACConfig:
-    num_critics: int = 10
+    num_critics: int = 10  # critic ensemble size
     eta: float = 1.0  # diversity weight (0 = SAC-N)
-    actor_lr: float = 3e-4
-    critic_lr: float = 3e-4
-    alpha_lr: float = 3e-4
-    gamma: float = 0.99
-    tau: float = 0.005
+    actor_lr: float = 3e-4  # Adam learning rate of the actor
+    critic_lr: float = 3e-4  # Adam learning rate of the critics
+    alpha_lr: float = 3e-4  # Adam learning rate of the entropy temperature
+    gamma: float = 0.99  # discount
+    tau: float = 0.005  # Polyak rate of the target networks
     hidden: tuple[int, ...] = (256, 256, 256)  # critic hidden widths (and the actor's unless actor_hidden is set)
     actor_hidden: tuple[int, ...] | None = None  # None: same as hidden
-    actor_layer_norm: bool = True
-    critic_layer_norm: bool = True
+    actor_layer_norm: bool = True  # LayerNorm after every hidden layer of the actor (the paper: on)
+    critic_layer_norm: bool = True  # LayerNorm after every hidden layer of the critics (the paper: on)
     layer_norm_affine: bool = True  # learned LN scale/bias; False = the authors' code (elementwise_affine=False)
     layer_norm_eps: float = 1e-6  # flax's default; torch's (the authors') 1e-5
     init: str = "flax"  # flax (lecun-normal, zero bias), torch (nn.Linear's default) or orthogonal (CORL's CQL)
@@ -71,22 +71,23 @@ class EDACConfig:
     log_alpha_bound: float = 0.0  # > 0: log alpha clipped to +-bound after each offline-RL step (authors: 10)
     timeouts: str = "bootstrap"  # TD target at a time-out: bootstrap, stop (the authors'), drop the row (CORL's)
     balance: str = "abs"  # EDAC+BC's normalisation: x / sg|x| (abs) or the authors' x / sg(x) (signed)
-    init_alpha: float = 1.0
+    init_alpha: float = 1.0  # initial entropy temperature
     backup_entropy: bool = True  # subtract alpha log pi(a'|s') in the TD target
     bc_weight: float = 0.0  # EDAC+BC: actor loss = SAC/sg|SAC| + bc_weight * MSE/sg|MSE| (0 = off)
     cql_alpha: float = 0.0  # CQL: critic loss = TD + cql_alpha * CQL penalty (0 = off)
-    cql_actions: int = 10
-    cql_temperature: float = 1.0
+    cql_actions: int = 10  # CQL: uniform actions sampled per state
+    cql_temperature: float = 1.0  # CQL: logsumexp temperature
     pretrain: Literal["none", "actor", "critic", "actor+critic"] = "actor+critic"
     pretrain_updates: int = 20_000  # split between soft BC and critic regression by actor_pretrain_fraction
-    actor_pretrain_fraction: float = 0.5
+    actor_pretrain_fraction: float = 0.5  # share of pretrain_updates spent on soft BC (the rest: critic regression)
     # pretrain_auto: each pre-training phase ends when its supervised losses stop improving (common.AutoStop: the
     # mean over a window of updates improved by less than tol, relative, for every member), pretrain_updates is then
     # the cap; the updates left go to offline RL
     pretrain_auto: bool = False
     pretrain_auto_window: int = 1_000  # must divide the evaluation interval
     pretrain_auto_tol: float = 0.01
-    lam: float = 0.0
+    lam: float = 0.0  # TD weight in critic pre-training (0 = pure MC; the paper: 0 or 0.1)
+    # how lam mixes: the authors' normalised losses (loss) or eq. 5's targets (target)
     lambda_mode: Literal["loss", "target"] = "loss"
     entropy_batch: int = 16_384  # rows per batch when computing the per-state entropies for the soft returns
     # CQL (CORL's cql.py): temperature, actor and critic losses all from the state before the update; False = EDAC

@@ -45,28 +45,28 @@ PretrainMode = Literal["none", "actor", "critic", "actor+critic"]
 @dataclasses.dataclass(frozen=True)
 class TD3BCConfig:
     alpha: float = 2.5  # TD3+BC's actor regularisation (hopper 10, halfcheetah 20, walker2d 5, Adroit 0.1 / pen 1)
-    actor_lr: float = 3e-4
-    critic_lr: float = 3e-4
-    gamma: float = 0.99
-    tau: float = 0.005
-    policy_noise: float = 0.2
-    noise_clip: float = 0.5
-    policy_delay: int = 2
+    actor_lr: float = 3e-4  # Adam learning rate of the actor
+    critic_lr: float = 3e-4  # Adam learning rate of the critics
+    gamma: float = 0.99  # discount
+    tau: float = 0.005  # Polyak rate of the target networks
+    policy_noise: float = 0.2  # std of the target policy smoothing noise
+    noise_clip: float = 0.5  # clip of the target policy smoothing noise
+    policy_delay: int = 2  # critic updates per actor and target update (TD3)
     hidden: tuple[int, ...] = (256, 256)  # critic hidden widths (and the actor's unless actor_hidden is set)
     actor_hidden: tuple[int, ...] | None = None  # None: same as hidden (the authors' actor: 3 x 256)
-    actor_layer_norm: bool = True
-    critic_layer_norm: bool = True
+    actor_layer_norm: bool = True  # LayerNorm after every hidden layer of the actor (the paper: on)
+    critic_layer_norm: bool = True  # LayerNorm after every hidden layer of the critics (the paper: on)
     layer_norm_affine: bool = True  # learned LN scale/bias; False = the authors' code (elementwise_affine=False)
     layer_norm_eps: float = 1e-6  # flax's default; torch's (the authors') 1e-5
     init: str = "flax"  # flax (lecun-normal, zero bias), torch (nn.Linear's default) or orthogonal
-    num_critics: int = 2
+    num_critics: int = 2  # critic ensemble size
     timeouts: str = "bootstrap"  # TD target at a time-out: bootstrap, stop (the authors'), drop the row (CORL's)
     q_scale_eps: float = 1e-8  # lmbda = alpha / (mean|Q| + q_scale_eps); CORL and the authors: 0
     # TD3+BC+CQL: critic loss = TD/sg|TD| + cql_weight * CQL/sg|CQL| (0 = off)
     cql_weight: float = 0.0
     balance: str = "abs"  # the hybrid's normalisation: x / sg|x| (abs) or the authors' x / sg(x) (signed)
-    cql_actions: int = 10
-    cql_temperature: float = 1.0
+    cql_actions: int = 10  # CQL: uniform actions sampled per state
+    cql_temperature: float = 1.0  # CQL: logsumexp temperature
     # pre-training
     pretrain: PretrainMode = "actor+critic"
     pretrain_updates: int = 10_000
