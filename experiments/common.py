@@ -230,6 +230,8 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
         if args.resume is not None and args.config is not None:
             raise UsageError("--resume and --config exclude each other: --resume continues a run in place, "
                              "--config starts a new one from its settings")
+        if args.resume is not None and not (args.resume / "config.json").is_file():
+            raise UsageError(f"{args.resume}: nothing to resume (no config.json)")
         if args.resume is not None and given - RESUME_FLAGS:
             raise UsageError(f"--resume continues {args.resume} with its saved settings, so "
                              f"{_flags(parser, given - RESUME_FLAGS)} cannot change (only --updates, to extend it); "

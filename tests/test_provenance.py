@@ -8,7 +8,7 @@ from offrl_jax.runner import Study, Variant, run_study
 
 
 def test_config_json_holds_the_resolved_config_and_round_trips(tiny_dataset):
-    study = Study(name="t", dataset="hopper-medium", env="hopper", seeds=(0,), updates=200, eval_every=100,
+    study = Study(name="t", dataset="hopper-medium", env="hopper", seeds=(0,), updates=20_000, eval_every=1_000,
                   variants=(Variant.of("default", "td3bc"), Variant.of("a2.5", "td3bc", alpha=2.5)))
     text = study.record_json(tiny_dataset)
     raw = json.loads(text)
