@@ -17,7 +17,7 @@ import sys
 
 from experiments.common import OneLineParser, main_guard, positive_int, run_args, study_fields
 from offrl_jax.algos import PRESETS, preset_values
-from offrl_jax.runner import Study, Variant
+from offrl_jax.study import Study, Variant
 
 # label -> (algorithm, pre-training)
 VARIANTS = {

@@ -20,7 +20,9 @@ from offrl_jax import datasets
 from offrl_jax.checkpoint import atomic_write_text
 from offrl_jax.cli import OneLineParser  # noqa: F401  (re-exported: the studies import it from here)
 from offrl_jax.data.dataset import DatasetError
-from offrl_jax.runner import Diverged, Study, Variant, print_table, run_study
+from offrl_jax.results import print_table
+from offrl_jax.runner import Diverged, run_study
+from offrl_jax.study import Study, Variant
 
 
 class UsageError(ValueError):

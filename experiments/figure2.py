@@ -13,7 +13,7 @@ import sys
 
 from experiments.common import main_guard, positive_int
 from experiments.mujoco_medium import ENVS, LABELS, make_study, parser, pretrain_variants
-from offrl_jax.runner import Variant
+from offrl_jax.study import Variant
 
 # Unless given on the command line: 3k soft BC + 9k soft-return critic updates.  The critic starts near 0 (EDAC's
 # 3e-3 output init) and needs ~5k Adam steps just to reach the returns' scale (~300 on hopper); with 3k (the default

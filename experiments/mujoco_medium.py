@@ -20,12 +20,12 @@ import argparse
 import dataclasses
 import sys
 
-from experiments.flags import CONFIGS, NOT_FLAGS, add_config_flags, config_values, sweepable_fields
 from experiments.common import OneLineParser, UsageError, main_guard, positive_int, run_args, study_fields
+from experiments.flags import CONFIGS, NOT_FLAGS, add_config_flags, config_values, sweepable_fields
 from offrl_jax.algos import ALGOS, PRESETS, preset_values
 from offrl_jax.algos.edac import EDACConfig
 from offrl_jax.algos.td3bc import TD3BCConfig
-from offrl_jax.runner import Study, Variant
+from offrl_jax.study import Study, Variant
 
 ENVS = ("hopper", "halfcheetah", "walker2d")
 LEVELS = ("medium", "medium-replay", "full-replay", "medium-expert", "expert", "random")

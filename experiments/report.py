@@ -3,12 +3,12 @@
     python -m experiments.report results/mujoco_medium/default results/figure2/*/
 
 One table per run directory: variant, final score (mean ± 95 % CI over seeds), updates and seconds to 90 % of the
-from-scratch asymptote, with the asymptote and its trend (see `offrl_jax.runner.summarize`).  A directory holding
+from-scratch asymptote, with the asymptote and its trend (see `offrl_jax.results.summarize`).  A directory holding
 several studies (sub-directories with a summary.json each) gives one table per study.  `--curves` adds the
 seed-mean score at every evaluation (rows: variants, columns: updates) from the run's curves.csv.
 
 `--merge OUT` first merges the given run directories (one study, each run training some of its variants, e.g. one
-process per variant on a GPU) into OUT, re-summarised across them (`offrl_jax.runner.merge_runs`), and reports OUT:
+process per variant on a GPU) into OUT, re-summarised across them (`offrl_jax.results.merge_runs`), and reports OUT:
 
     python -m experiments.report --merge runs/door-all runs/door-BC runs/door-CQL
 """
@@ -20,7 +20,7 @@ from collections import defaultdict
 from pathlib import Path
 
 from experiments.common import OneLineParser
-from offrl_jax.runner import merge_runs, read_curves, summary_table as table
+from offrl_jax.results import merge_runs, read_curves, summary_table as table
 
 
 def summaries(path: Path) -> list[Path]:

@@ -83,7 +83,7 @@ def test_existing_output_is_never_overwritten(tmp_path, tiny_hdf5):
 
 
 def test_overwrite_replaces_an_earlier_run_only_once_the_new_one_can_start(tmp_path, tiny_hdf5):
-    from offrl_jax.runner import Study, Variant
+    from offrl_jax.study import Study, Variant
 
     out = tmp_path / "run"
     out.mkdir()
@@ -146,7 +146,8 @@ def test_parallel_variants_equal_one_after_another(tmp_path, tiny_hdf5):
 def test_vmapped_alpha_sweep_equals_separate_runs(tmp_path, tiny_dataset):
     import dataclasses
 
-    from offrl_jax.runner import Study, Variant, run_study
+    from offrl_jax.runner import run_study
+    from offrl_jax.study import Study, Variant
 
     variants = tuple(Variant.of(f"alpha={a:g}", "td3bc", pretrain="none", alpha=a, hidden=(32, 32))
                      for a in (1.0, 10.0))

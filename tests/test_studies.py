@@ -87,7 +87,7 @@ def test_figure2_num_critics_is_edac_only():
 
 
 def test_alpha_sweep_builds_one_variant_per_value_and_groups_them():
-    from offrl_jax.runner import sweep_groups
+    from offrl_jax.study import sweep_groups
 
     (study,) = build(mujoco_medium, ["--alpha", "1", "2.5", "10"])
     assert labels(study) == [f"{p} alpha={a}" for p in ("pretrained", "scratch") for a in ("1", "2.5", "10")]
@@ -145,7 +145,8 @@ def test_a_failing_parallel_variant_stops_the_others_at_once(tmp_path, monkeypat
     import time
 
     from offrl_jax import runner
-    from offrl_jax.runner import Stopped, Study, Variant, run_study
+    from offrl_jax.runner import Stopped, run_study
+    from offrl_jax.study import Study, Variant
 
     def fake_group(study, group, swept, ds, out_dir, resume, bar, recorder):
         if group[0].label == "slow":

@@ -1,7 +1,8 @@
 """summary.json's numbers from hand-made curves: final score, asymptote, its trend, updates/seconds to 90 %."""
 import pytest
 
-from offrl_jax.runner import Study, Variant, summarize
+from offrl_jax.results import summarize
+from offrl_jax.study import Study, Variant
 
 
 def rows_of(label, curve_per_seed, every=1000):
@@ -74,7 +75,7 @@ def test_diverged_seed_is_named_and_ci_uses_the_t_quantile():
 
     import numpy as np
 
-    from offrl_jax.runner import ci95, t975
+    from offrl_jax.results import ci95, t975
 
     study = Study(name="t", dataset="hopper-medium", env="hopper", seeds=(0, 1, 2), updates=2000, eval_every=1000,
                   variants=(Variant.of("scratch", "td3bc", pretrain="none"),), reference="scratch")
@@ -152,7 +153,7 @@ def test_a_seed_that_diverges_inside_the_final_window_has_no_final_score():
 def test_summary_json_writes_null_for_nan():
     import json
 
-    from offrl_jax.runner import summary_json
+    from offrl_jax.results import summary_json
 
     text = summary_json([{"asymptote": float("nan"), "final_score_mean": 3.0, "overrides": {"x": float("inf")}}])
     assert json.loads(text) == [{"asymptote": None, "final_score_mean": 3.0, "overrides": {"x": None}}]
@@ -160,7 +161,7 @@ def test_summary_json_writes_null_for_nan():
 
 
 def _run_dir(path, study, rows):
-    from offrl_jax.runner import write_curves
+    from offrl_jax.results import write_curves
 
     path.mkdir()
     (path / "config.json").write_text(study.to_json())
@@ -172,7 +173,7 @@ def test_merge_runs_resummarises_variants_trained_apart(tmp_path, capsys):
     import json
 
     from experiments import report
-    from offrl_jax.runner import read_curves
+    from offrl_jax.results import read_curves
 
     common = dict(name="t", dataset="hopper-medium", env="hopper", seeds=(0, 1), updates=4000, eval_every=1000)
     pre = Study(variants=(Variant.of("pretrained", "td3bc", pretrain_updates=2000),), **common)

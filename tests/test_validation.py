@@ -2,7 +2,7 @@
 import pytest
 
 from offrl_jax.algos import make_config
-from offrl_jax.runner import Study, Variant
+from offrl_jax.study import Study, Variant
 
 
 @pytest.mark.parametrize("algo, overrides, message", [

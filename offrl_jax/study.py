@@ -1,0 +1,137 @@
+"""What a study is: variants (an algorithm and its hyper-parameters) on one dataset and env, seeds and budget.
+
+A `Study` is plain data with its JSON (`config.json`): `to_json`/`from_json` for the study itself, `record_json`
+adding every variant's resolved config and the run records (`offrl_jax.provenance`).  `sweep_groups` finds the
+variants that can train as one vmapped program.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+from typing import Any
+
+from offrl_jax.algos import ALGOS, make_algorithm, make_config
+from offrl_jax.data.dataset import Dataset
+from offrl_jax.driver import check_call_grid
+from offrl_jax.envs import get_env_spec
+from offrl_jax.provenance import run_record
+
+
+@dataclasses.dataclass(frozen=True)
+class Variant:
+    label: str  # unique, used in files: "pretrained", "scratch", "lambda=0.1", ...
+    algo: str
+    overrides: tuple[tuple[str, Any], ...] = ()  # config overrides as (name, value) pairs
+
+    @staticmethod
+    def of(label: str, algo: str, **overrides: Any) -> Variant:
+        return Variant(label, algo, tuple(sorted(overrides.items())))
+
+
+@dataclasses.dataclass(frozen=True)
+class Study:
+    name: str
+    dataset: str  # a known name ("hopper-medium") or a path
+    env: str
+    variants: tuple[Variant, ...]
+    seeds: tuple[int, ...] = (0, 1, 2)
+    updates: int = 100_000
+    eval_every: int = 5_000
+    eval_episodes: int = 10
+    batch_size: int = 256
+    checkpoint_every: int = 0  # 0 = at every evaluation
+    max_transitions: int | None = None  # train on the first N transitions only (quick runs, tests); never cached
+    clip_actions: bool = False  # clip out-of-bounds dataset actions (with a warning) instead of refusing the data
+    reference: str | None = None  # label of the from-scratch variant whose final score is the asymptote (None: no
+    # asymptote, and no updates/seconds to 90 %)
+    final_window: tuple[int, int] | None = None  # final score = mean of evaluations in [lo, hi] (Adroit protocol)
+    vmap_sweeps: bool = True  # variants differing only in one sweepable value (e.g. alpha) share one vmapped program
+
+    def __post_init__(self):
+        for name in ("updates", "eval_every", "eval_episodes", "batch_size"):
+            if getattr(self, name) <= 0:
+                raise ValueError(f"Study.{name} = {getattr(self, name)} must be positive")
+        if not self.seeds:
+            raise ValueError("Study.seeds must not be empty")
+        if self.checkpoint_every < 0:
+            raise ValueError(f"Study.checkpoint_every = {self.checkpoint_every} must be >= 0")
+        labels = [v.label for v in self.variants]
+        if not labels or len(set(labels)) != len(labels):
+            raise ValueError(f"Study.variants need unique labels, got {labels}")
+        if self.reference is not None and not any(reference_label(self, label) for label in labels):
+            raise ValueError(f"Study.reference = {self.reference!r} is not a variant label ({', '.join(labels)})")
+        get_env_spec(self.env)
+        for v in self.variants:  # every variant's hyper-parameters and budget are checked before anything is written
+            config = make_config(v.algo, self.env, self.dataset, **dict(v.overrides))
+            phases = make_algorithm(config, obs_dim=1, act_dim=1, num_transitions=1).phases(self.updates)
+            check_call_grid(phases, self.eval_every)
+
+    def to_json(self) -> str:
+        return json.dumps(dataclasses.asdict(self), indent=2)
+
+    def resolved(self) -> dict[str, dict[str, Any]]:
+        """{label: every field of the variant's algorithm config, after per-env defaults, preset and overrides}."""
+        return {v.label: dataclasses.asdict(make_config(v.algo, self.env, self.dataset, **dict(v.overrides)))
+                for v in self.variants}
+
+    def record_json(self, ds: Dataset | None = None, previous: str | None = None) -> str:
+        """config.json: the study, its resolved configs, and the run records so far plus this one."""
+        runs = json.loads(previous).get("runs", []) if previous else []
+        raw = dataclasses.asdict(self) | {"resolved": self.resolved(),
+                                          "runs": runs + [run_record(ds, self.dataset)]}
+        return json.dumps(raw, indent=2, default=list) + "\n"
+
+    @staticmethod
+    def from_json(text: str) -> Study:
+        raw = json.loads(text)
+        for recorded in ("resolved", "runs"):  # what the run wrote about itself; the study is the rest
+            raw.pop(recorded, None)
+        if "transitions" in raw:  # runs saved before the cap was renamed
+            raw["max_transitions"] = raw.pop("transitions")
+        value = lambda x: tuple(x) if isinstance(x, list) else x  # noqa: E731  JSON has lists; configs use tuples
+        raw["variants"] = tuple(Variant(v["label"], v["algo"], tuple((k, value(x)) for k, x in v["overrides"]))
+                                for v in raw["variants"])
+        raw["seeds"] = tuple(raw["seeds"])
+        raw["final_window"] = tuple(raw["final_window"]) if raw.get("final_window") else None
+        return Study(**raw)
+
+
+def reference_label(study: Study, label: str) -> str | None:
+    """The from-scratch variant `label` is measured against: `study.reference` (None: none), or in a sweep, where
+    labels end in " alpha=2.5" etc., the reference with the same value ("scratch alpha=2.5")."""
+    reference = study.reference
+    if reference is None:
+        return None
+    labels = {v.label for v in study.variants}
+    if reference in labels:
+        return reference
+    last = label.rsplit(" ", 1)[-1]
+    swept = reference + " " + last if " " in label and "=" in last else None
+    return swept if swept in labels else None
+
+
+def sweep_groups(variants: tuple[Variant, ...]) -> list[tuple[tuple[Variant, ...], str | None]]:
+    """Variants of one algorithm whose overrides differ only in one sweepable hyper-parameter (`SWEEPABLE`, e.g.
+    TD3+BC's alpha) run as one vmapped program: [(variants, swept name or None)], in study order of first member."""
+    groups: list[list] = []  # [[variants], swept name or None]
+    for v in variants:
+        for group in groups:
+            key = _swept_name(group[0][0], v)
+            if key is not None and group[1] in (None, key):
+                group[0].append(v)
+                group[1] = key
+                break
+        else:
+            groups.append([[v], None])
+    return [(tuple(members), name) for members, name in groups]
+
+
+def _swept_name(a: Variant, b: Variant) -> str | None:
+    if a.algo != b.algo:
+        return None
+    da, db = dict(a.overrides), dict(b.overrides)
+    diff = [k for k in sorted(da.keys() | db.keys()) if da.get(k) != db.get(k)]
+    if len(diff) != 1 or diff[0] not in da or diff[0] not in db:
+        return None
+    sweepable = ALGOS[a.algo][0].SWEEPABLE
+    return diff[0] if diff[0] in sweepable and all(isinstance(d[diff[0]], (int, float)) for d in (da, db)) else None
