@@ -185,3 +185,14 @@ def test_random_scores_report_the_installed_reward_too():
     assert door.shape == door_installed.shape == (2,) and not np.allclose(door, door_installed)
     pen, pen_installed = random_returns("pen", 2, seed=0)  # pen's reward was not changed
     np.testing.assert_array_equal(pen, pen_installed)
+
+
+def test_every_sweepable_field_sweeps_from_the_command_line():
+    from offrl_jax.study import sweep_groups
+
+    for flag, name in (("--tau", "tau"), ("--policy-noise", "policy_noise"), ("--noise-clip", "noise_clip")):
+        (study,) = build(mujoco_medium, [flag, "0.1", "0.2", "--pretrain", "none"])
+        assert labels(study) == [f"scratch {name}=0.1", f"scratch {name}=0.2"]
+        assert [n for _, n in sweep_groups(study.variants)] == [name]
+    (study,) = build(mujoco_medium, ["--algo", "edac", "--tau", "0.01", "0.02", "--pretrain", "none"])
+    assert [n for _, n in sweep_groups(study.variants)] == ["tau"]
