@@ -1,5 +1,8 @@
 """What every experiment CLI shares: the run flags, the output-directory rules, one-line errors.
 
+Expected failures (bad flags, bad data, an unwritable place, divergence) print one line; `OFFRL_JAX_DEBUG=1` in the
+environment re-raises them with the traceback instead.
+
 Rules: a new run writes to a new timestamped directory under runs/<study>/ unless --out is given; an existing,
 non-empty --out is refused unless --overwrite, and --overwrite replaces only a directory whose config.json is a
 saved study, after the new run's data has loaded; --resume DIR continues the study (or studies) saved in DIR
@@ -10,6 +13,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import os
 import shutil
 import sys
 import time
@@ -279,12 +283,11 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
                                 parallel=args.parallel)
             print_table(summary)
             print(f"results: {study_out}/summary.json, curves.csv, curves.png", file=sys.stderr)
-    except (UsageError, DatasetError, ValueError, OSError) as e:
+    except (UsageError, DatasetError, ValueError, OSError, Diverged) as e:
+        if os.environ.get("OFFRL_JAX_DEBUG") == "1":  # the traceback, for whoever is debugging the code
+            raise
         print(f"error: {e}", file=sys.stderr)
-        return 2
-    except Diverged as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 3
+        return 3 if isinstance(e, Diverged) else 2
     except KeyboardInterrupt:
         where = f"; resume with --resume {out}" if out is not None and (out / "config.json").is_file() else ""
         print(f"interrupted{where}", file=sys.stderr)

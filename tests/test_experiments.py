@@ -193,3 +193,10 @@ def test_config_replays_a_saved_run_and_resume_refuses_other_settings(tmp_path, 
     cli("--dataset-path", tiny_hdf5, "--out", longer, *TINY[:1], "600", *TINY[2:], check=True, timeout=600)
     assert curves_without_time(first / "curves.csv") == curves_without_time(longer / "curves.csv")
     assert len(json.loads((first / "config.json").read_text())["runs"]) == 2  # the start and the extension
+
+
+def test_debug_variable_shows_the_traceback(tmp_path):
+    result = cli("--lam", "1.5", "--out", tmp_path / "x", timeout=120)
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    result = cli("--lam", "1.5", "--out", tmp_path / "x", timeout=120, env=os.environ | {"OFFRL_JAX_DEBUG": "1"})
+    assert result.returncode != 0 and "Traceback" in result.stderr and "lam = 1.5" in result.stderr
