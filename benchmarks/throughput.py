@@ -38,7 +38,7 @@ import numpy as np
 
 from benchmarks.flops import chain_flops, update_flops
 from offrl_jax.algos import make_algorithm, make_config
-from offrl_jax.cli import OneLineParser
+from offrl_jax.cli import OneLineParser, check_writable_file, number, positive_int
 from offrl_jax.data.dataset import Dataset
 from offrl_jax.driver import CHUNK, INIT, device_data, make_chunk_fn, seed_keys, seed_sharding
 
@@ -275,24 +275,34 @@ def markdown(records: list[dict[str, Any]]) -> str:
 
 
 def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
-    p = OneLineParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawTextHelpFormatter)
+    p = OneLineParser(prog="python -m benchmarks.throughput", description=__doc__.split("\n\n")[0],
+                      formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--algo", nargs="*", help="only these registry names (default: all)")
-    p.add_argument("--seeds", nargs="*", type=int, default=[1, 2, 4, 8], help="vmapped seed counts (default 1 2 4 8)")
+    p.add_argument("--seeds", nargs="*", type=positive_int, default=[1, 2, 4, 8],
+                   help="vmapped seed counts (default 1 2 4 8)")
     p.add_argument("--phase", nargs="*", help="only these phase labels (e.g. offline_rl)")
-    p.add_argument("--num-critics", nargs="*", type=int, help="only cases with these ensemble sizes")
+    p.add_argument("--num-critics", nargs="*", type=positive_int, help="only cases with these ensemble sizes")
     p.add_argument("--json", action="store_true", help="one JSON object per case on stdout")
     p.add_argument("--quick", action="store_true", help="one tiny case (BC, S=1, 10k rows): a smoke test")
-    p.add_argument("--transitions", type=int, default=100_000)
-    p.add_argument("--target-s", type=float, default=0.25, help="aimed-for seconds per timed chunk")
-    p.add_argument("--reps", type=int, default=3, help="timed chunks per case after a warm-up (median reported)")
-    p.add_argument("--heavy-s", type=float, default=1.5,
+    p.add_argument("--transitions", type=positive_int, default=100_000, help="rows of the synthetic dataset")
+    p.add_argument("--target-s", type=number(0, low_open=True), default=0.25, help="aimed-for seconds per timed chunk")
+    p.add_argument("--reps", type=positive_int, default=3,
+                   help="timed chunks per case after a warm-up (median reported)")
+    p.add_argument("--heavy-s", type=number(0, low_open=True), default=1.5,
                    help="chunks longer than this (one call per seed) are timed once without warm-up")
     p.add_argument("--markdown", metavar="FILE", help="print a markdown table of a results .jsonl file and exit")
     p.add_argument("--out", help="also write JSON lines to results/benchmarks/OUT.jsonl (or OUT if it is a path)")
     args = p.parse_args(argv)
+    if args.seeds == []:
+        p.error("--seeds needs at least one seed count")
 
     if args.markdown:
-        lines = [json.loads(line) for line in Path(args.markdown).read_text().splitlines() if line.strip()]
+        try:
+            lines = [json.loads(line) for line in Path(args.markdown).read_text().splitlines() if line.strip()]
+            if not all(isinstance(line, dict) for line in lines):
+                raise ValueError("not one JSON object per line")
+        except (OSError, ValueError) as e:
+            p.error(f"{args.markdown}: not a results file of this benchmark ({e})")
         if lines and "meta" in lines[0]:
             m = lines.pop(0)["meta"]
             print(f"`{m['command']}` — {m['date']}, {m['machine']}, load average at start {m['load_avg']}, "
@@ -309,6 +319,15 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
         seed_counts = args.seeds
         if not cases:
             p.error(f"no case for --algo {args.algo} --phase {args.phase} --num-critics {args.num_critics}")
+    out_path = None
+    if args.out:
+        out_path = Path(args.out)
+        if out_path.parent == Path("."):
+            out_path = RESULTS_DIR / (out_path.name if out_path.suffix else f"{out_path.name}.jsonl")
+        try:
+            check_writable_file(out_path)
+        except OSError as e:
+            p.error(str(e))
 
     meta = {"command": " ".join([Path(sys.executable).name, "-m", "benchmarks.throughput", *sys.argv[1:]]),
             "date": datetime.datetime.now().isoformat(timespec="seconds"), "machine": machine(),
@@ -340,10 +359,8 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     meta["seconds"] = round(time.perf_counter() - start, 1)
     meta["matmul1024_gflops"] = round(matmul, 2)
     log(f"# done in {meta['seconds']}s")
-    if args.out:
-        path = Path(args.out)
-        if path.parent == Path("."):
-            path = RESULTS_DIR / (path.name if path.suffix else f"{path.name}.jsonl")
+    if out_path is not None:
+        path = out_path
         path.parent.mkdir(parents=True, exist_ok=True)
         with path.open("w") as f:
             f.write(json.dumps({"meta": meta}) + "\n")

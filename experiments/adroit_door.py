@@ -17,6 +17,7 @@ import sys
 
 from experiments.common import OneLineParser, main_guard, positive_int, run_args, study_fields
 from offrl_jax.algos import PRESETS, preset_values
+from offrl_jax.cli import number
 from offrl_jax.study import Study, Variant
 
 # label -> (algorithm, pre-training)
@@ -56,9 +57,10 @@ def make_parser() -> argparse.ArgumentParser:
                       formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--dataset", choices=("door-human", "door-cloned"), default="door-human")
     p.add_argument("--variants", nargs="+", choices=tuple(VARIANTS), default=list(VARIANTS))
-    p.add_argument("--scale", type=float, default=0.1, help="fraction of the paper's update counts (default 0.1)")
+    p.add_argument("--scale", type=number(0, 10, low_open=True), default=0.1,
+                   help="fraction of the paper's update counts, in (0, 10] (default 0.1)")
     p.add_argument("--num-critics", type=positive_int, default=None, help="EDAC(+BC) ensemble size (paper: 50)")
-    p.add_argument("--alpha", type=float, default=None,
+    p.add_argument("--alpha", type=number(0), default=None,
                    help="TD3+BC(+CQL) alpha (default: the paper's 0.1; the authors' door config: 1.0)")
     p.add_argument("--balance", choices=("abs", "signed"), default=None,
                    help="the hybrids' loss balancing: x/sg|x| (abs, default) or the authors' x/sg(x) (signed)")

@@ -20,6 +20,7 @@ from tqdm.auto import tqdm
 
 from experiments.common import OneLineParser, refuse_existing
 from offrl_jax.checkpoint import atomic_write_text
+from offrl_jax.cli import check_writable_dir, int_at_least
 from offrl_jax.envs import ENVS, make_env
 
 PAPER_TABLE4 = {"pen": -162.09, "door": -84.52, "hammer": -856.83, "relocate": -37.95}
@@ -46,16 +47,19 @@ def random_returns(env_name: str, episodes: int, seed: int) -> tuple[np.ndarray,
 def main(argv=None) -> int:
     ap = OneLineParser(prog="experiments.adroit_random_scores", description=__doc__,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--episodes", type=int, default=100)
+    ap.add_argument("--episodes", type=int_at_least(2), default=100, help="episodes per env (>= 2, for a standard "
+                    "error; default %(default)s)")
     ap.add_argument("--envs", nargs="+", choices=tuple(PAPER_TABLE4), default=list(PAPER_TABLE4))
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, default=None)
     ap.add_argument("--overwrite", action="store_true", help="replace the files of an earlier run in --out")
     args = ap.parse_args(argv)
-    if args.episodes < 2:
-        print("error: --episodes must be >= 2 (for a standard error)", file=sys.stderr)
-        return 2
     refuse_existing(ap, args.out, args.overwrite)
+    if args.out is not None:
+        try:
+            check_writable_dir(args.out)
+        except OSError as e:
+            ap.error(str(e))
     rows = []
     lines = [f"{'env':<9} {'limit':>5} {'episodes':>8} {'mean':>10} {'s.e.':>7} {'paper':>9} {'diff/s.e.':>9} "
              f"{'installed':>10}"]

@@ -22,7 +22,7 @@ from pathlib import Path
 
 from offrl_jax import datasets
 from offrl_jax.checkpoint import atomic_write_text
-from offrl_jax.cli import OneLineParser  # noqa: F401  (re-exported: the studies import it from here)
+from offrl_jax.cli import OneLineParser, check_writable_dir, positive_int  # noqa: F401  (re-exported: the studies import them from here)
 from offrl_jax.data.dataset import DatasetError
 from offrl_jax.results import print_table
 from offrl_jax.runner import Diverged, run_study
@@ -31,19 +31,6 @@ from offrl_jax.study import Study, Variant
 
 class UsageError(ValueError):
     pass
-
-
-def positive_int(text: str) -> int:
-    try:  # "1e6" is accepted, "2.5e0" and "1e400" are not
-        number = float(text) if "e" in text.lower() else int(text)
-        value = int(number)
-        if value != number:
-            raise ValueError
-    except (ValueError, OverflowError):
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got '{text}'") from None
-    if value <= 0:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got '{text}'")
-    return value
 
 
 def run_args(parser: argparse.ArgumentParser, updates: int | None, eval_every: int | None, seeds: int = 3) -> None:
@@ -255,6 +242,7 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
         elif args.resume is None:
             built = build(args)  # validates every hyper-parameter and budget
         out, replace = output_dir(args, parser.prog.split(".")[-1])
+        check_writable_dir(out)  # before any data is loaded or generated
         if args.resume is not None:
             built = saved_studies(out)
             if "updates" in given:

@@ -20,6 +20,7 @@ from collections import defaultdict
 from pathlib import Path
 
 from experiments.common import OneLineParser
+from offrl_jax.cli import check_writable_dir
 from offrl_jax.results import merge_runs, read_curves, summary_table as table
 
 
@@ -30,6 +31,17 @@ def summaries(path: Path) -> list[Path]:
     if not found:
         raise FileNotFoundError(f"{path}: no summary.json here or in its sub-directories")
     return found
+
+
+def read_summary(path: Path) -> list[dict]:
+    """A summary.json: a list of one object per variant (anything else is refused with one line)."""
+    try:
+        summary = json.loads(path.read_text())
+    except json.JSONDecodeError as e:
+        raise ValueError(f"{path}: not valid JSON ({e})") from None
+    if not isinstance(summary, list) or not all(isinstance(s, dict) and "variant" in s for s in summary):
+        raise ValueError(f"{path}: not a run's summary (a list of one object per variant expected)")
+    return summary
 
 
 def curve_table(curves: Path) -> str:
@@ -56,14 +68,18 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     try:
         if args.merge:
+            if args.merge.is_dir() and any(args.merge.iterdir()):
+                what = "already holds a run" if (args.merge / "config.json").exists() else "is not empty"
+                raise FileExistsError(f"{args.merge} {what}; merge into a new directory")
+            check_writable_dir(args.merge)
             merge_runs(args.dirs, args.merge)
             args.dirs = [args.merge]
         for d in args.dirs:
             for path in summaries(d):
-                print(f"### {path.parent}\n\n{table(json.loads(path.read_text()))}\n")
+                print(f"### {path.parent}\n\n{table(read_summary(path))}\n")
                 if args.curves:
                     print(curve_table(path.parent / "curves.csv") + "\n")
-    except (FileNotFoundError, FileExistsError, ValueError, KeyError, IndexError) as e:
+    except (OSError, ValueError, KeyError, IndexError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
     return 0

@@ -21,6 +21,7 @@ import numpy as np
 
 from experiments.common import OneLineParser, refuse_existing
 from offrl_jax.checkpoint import atomic_write_text
+from offrl_jax.cli import check_writable_dir, int_at_least, number, positive_int
 
 
 def random_mdp(rng: np.random.Generator, states: int, actions: int) -> tuple[np.ndarray, np.ndarray]:
@@ -133,21 +134,26 @@ def _fmt(x: float | None) -> str:
 def main(argv=None) -> int:
     ap = OneLineParser(prog="experiments.theory", description=__doc__,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--mdps", type=int, default=20)
-    ap.add_argument("--states", type=int, default=50)
-    ap.add_argument("--actions", type=int, default=4)
-    ap.add_argument("--gamma", type=float, default=0.99)
-    ap.add_argument("--eps", type=float, nargs="+", default=[0.0, 0.01])
-    ap.add_argument("--betas", type=float, nargs="+", default=[0.0, 0.5, 0.8, 0.9, 0.95, 0.99])
-    ap.add_argument("--delta", type=float, default=1e-3, help="target error as a fraction of ||Q*||")
+    ap.add_argument("--mdps", type=positive_int, default=20)
+    ap.add_argument("--states", type=int_at_least(2), default=50)
+    ap.add_argument("--actions", type=int_at_least(2), default=4)
+    ap.add_argument("--gamma", type=number(0, 1, low_open=True, high_open=True), default=0.99)
+    ap.add_argument("--eps", type=number(0), nargs="+", default=[0.0, 0.01],
+                    help="approximation errors per iteration (>= 0)")
+    ap.add_argument("--betas", type=number(0, 1), nargs="+", default=[0.0, 0.5, 0.8, 0.9, 0.95, 0.99],
+                    help="behaviour policies beta*greedy + (1-beta)*uniform (in [0, 1])")
+    ap.add_argument("--delta", type=number(0, 1, low_open=True, high_open=True), default=1e-3,
+                    help="target error as a fraction of ||Q*||, in (0, 1)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, default=None, help="write rows.json, summary.json and theory.png here")
     ap.add_argument("--overwrite", action="store_true", help="replace the files of an earlier run in --out")
     ap.add_argument("--json", action="store_true", help="print the summary as JSON")
     args = ap.parse_args(argv)
-    if not 0 < args.gamma < 1 or args.mdps <= 0 or args.states <= 1 or args.actions <= 1:
-        print("error: need 0 < gamma < 1, mdps > 0, states > 1, actions > 1", file=sys.stderr)
-        return 2
+    if args.out is not None:
+        try:
+            check_writable_dir(args.out)
+        except OSError as e:
+            ap.error(str(e))
     refuse_existing(ap, args.out, args.overwrite)
     rows = run(args.mdps, args.states, args.actions, args.gamma, args.eps, args.betas, args.delta, args.seed)
     summary = table(rows)

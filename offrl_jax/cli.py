@@ -1,8 +1,14 @@
-"""The argument parser every command of the project uses: bad input is one line, `error: ...`, exit 2."""
+"""What every command of the project shares: one-line errors (`error: ...`, exit 2), typed numbers that refuse NaN,
+infinities and out-of-range values while the flags are parsed, and a check that an output place is writable before
+any work is spent."""
 from __future__ import annotations
 
 import argparse
+import math
 import sys
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
 
 
 class OneLineParser(argparse.ArgumentParser):
@@ -15,3 +21,78 @@ class OneLineParser(argparse.ArgumentParser):
     def error(self, message: str):
         print(f"error: {message}", file=sys.stderr)
         sys.exit(2)
+
+
+def positive_int(text: str) -> int:
+    try:  # "1e6" is accepted, "2.5e0" and "1e400" are not
+        number = float(text) if "e" in text.lower() else int(text)
+        value = int(number)
+        if value != number:
+            raise ValueError
+    except (ValueError, OverflowError):
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got '{text}'") from None
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got '{text}'")
+    return value
+
+
+def int_at_least(low: int) -> Callable[[str], int]:
+    def convert(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer >= {low}, got '{text}'") from None
+        if value < low:
+            raise argparse.ArgumentTypeError(f"expected an integer >= {low}, got '{text}'")
+        return value
+    return convert
+
+
+def number(low: float = -math.inf, high: float = math.inf, low_open: bool = False,
+           high_open: bool = False) -> Callable[[str], float]:
+    """A finite float within [low, high] (open at an end where asked), as an argparse type."""
+    left, right = "(" if low_open else "[", ")" if high_open else "]"
+    if high == math.inf:
+        where = "" if low == -math.inf else f" {'>' if low_open else '>='} {low:g}"
+    else:
+        where = f" {'<' if high_open else '<='} {high:g}" if low == -math.inf else f" in {left}{low:g}, {high:g}{right}"
+
+    def convert(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number{where}, got '{text}'") from None
+        inside = (value > low if low_open else value >= low) and (value < high if high_open else value <= high)
+        if not math.isfinite(value) or not inside:
+            raise argparse.ArgumentTypeError(f"expected a finite number{where}, got '{text}'")
+        return value
+    return convert
+
+
+def check_writable_dir(path: Path) -> None:
+    """Raise OSError (one line) unless `path` is, or can be made, a directory this process can write a file in.
+    Tried for real (directories made, a temporary file written), then undone: nothing is left behind."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise OSError(f"{path} is a file, not a directory")
+    missing = [d for d in (path, *path.parents) if not d.exists()]
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=path):
+            pass
+    except OSError as e:
+        raise OSError(f"{path}: not writable ({e.strerror or e})") from None
+    finally:
+        for d in missing:  # deepest first
+            try:
+                d.rmdir()
+            except OSError:
+                pass
+
+
+def check_writable_file(path: Path) -> None:
+    """Raise OSError unless a file can be written at `path` (its directory writable, itself not a directory)."""
+    path = Path(path)
+    if path.is_dir():
+        raise OSError(f"{path} is a directory, not a file")
+    check_writable_dir(path.parent if str(path.parent) else Path("."))

@@ -20,7 +20,7 @@ import tempfile
 import warnings
 from pathlib import Path
 
-from offrl_jax.cli import OneLineParser
+from offrl_jax.cli import OneLineParser, check_writable_dir, positive_int
 from offrl_jax.data.dataset import Dataset, DatasetError, dataset_dir
 from offrl_jax.data.readers import load_dataset_path, minari_root, read_door_npz, read_minari
 from offrl_jax.envs import get_env_spec, normalized_score
@@ -70,8 +70,10 @@ def _unknown(name_or_path) -> DatasetError:
     return DatasetError(f"{name_or_path}: unknown dataset name and no such file; known names: {', '.join(KNOWN)}")
 
 
-def generate(name: str, *, transitions: int | None = None, out_dir=None, seed: int = 0) -> Path:
-    """Generate a known dataset with `offrl_jax.data.generate` and return its Minari directory."""
+def generate(name: str, *, transitions: int | None = None, out_dir=None, seed: int = 0,
+             overwrite: bool = False) -> Path:
+    """Generate a known dataset with `offrl_jax.data.generate` and return its Minari directory (an existing one is
+    refused unless `overwrite`)."""
     if name not in KNOWN or name in SHARED_NAMES:
         generated = [n for n in KNOWN if n not in SHARED_NAMES]
         raise DatasetError(f"{name}: not a generated dataset; generated names: {', '.join(generated)}")
@@ -79,7 +81,8 @@ def generate(name: str, *, transitions: int | None = None, out_dir=None, seed: i
         from offrl_jax.data.generate import generate as _generate
     except ImportError as e:
         raise DatasetError(f"{name}: the dataset generator is not available ({e})") from None
-    return Path(_generate(name, transitions=transitions, out_dir=out_dir, seed=seed))
+    kw = {"overwrite": True} if overwrite else {}
+    return Path(_generate(name, transitions=transitions, out_dir=out_dir, seed=seed, **kw))
 
 
 def _generation_cap(path: Path) -> int | None:
@@ -174,11 +177,12 @@ def _parser() -> argparse.ArgumentParser:
     info.add_argument("--clip-actions", action="store_true", default=None, help="clip actions outside [-1, 1]")
     gen = sub.add_parser("generate", help="generate a known dataset into the cache (or --out)")
     gen.add_argument("name", help="a generated name from `list` (e.g. hopper-medium, walker2d-expert, door-cloned)")
-    gen.add_argument("--transitions", type=int, default=None,
+    gen.add_argument("--transitions", type=positive_int, default=None,
                      help="cap on the number of transitions (default: 1M per policy; the whole run for replay "
                           "levels); a capped dataset in the cache is reported as such whenever it is loaded")
     gen.add_argument("--out", type=Path, default=None, help="dataset directory (default: the cache, see `list`)")
     gen.add_argument("--seed", type=int, default=0, help="seed of the rollouts (envs and action noise)")
+    gen.add_argument("--overwrite", action="store_true", help="replace a dataset already generated there")
     return parser
 
 
@@ -206,8 +210,16 @@ def main(argv: list[str] | None = None) -> int:
             ds = load(args.dataset, clip_actions=args.clip_actions, generate_if_missing=False)
             print(json.dumps(summary(ds)))
         else:
-            print(generate(args.name, transitions=args.transitions, out_dir=args.out, seed=args.seed))
-    except (DatasetError, ValueError, FileNotFoundError) as e:
+            target = Path(args.out) if args.out is not None else cached_path(args.name)
+            if args.name in KNOWN and args.name not in SHARED_NAMES:
+                if target.exists() and not target.is_dir():
+                    raise DatasetError(f"{target} is a file, not a dataset directory")
+                if target.exists() and not args.overwrite:
+                    raise DatasetError(f"{target} exists; pass --overwrite to generate '{args.name}' again")
+                check_writable_dir(target.parent)
+            print(generate(args.name, transitions=args.transitions, out_dir=args.out, seed=args.seed,
+                           overwrite=args.overwrite))
+    except (DatasetError, ValueError, OSError) as e:
         print(f"error: {' '.join(str(e).split())}", file=sys.stderr)
         return 2
     return 0

@@ -58,3 +58,81 @@ def test_experiment_cli_rejects_dims_that_do_not_match_the_chosen_env(tmp_path):
     last = result.stderr.strip().splitlines()[-1]
     assert last.startswith(f"error: {path}") and "hopper" in last, result.stderr
     assert not (tmp_path / "out").exists()
+
+
+# ------------------------------------------------------------------------------------ every secondary entry point
+def _one_line_error(module: str, *args: str, cwd=None):
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    result = subprocess.run([sys.executable, "-m", module, *args], cwd=cwd or root, capture_output=True, text=True,
+                            timeout=300)
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 2, result.stderr
+    assert "Traceback" not in result.stderr and lines and lines[-1].startswith("error:"), result.stderr
+    return lines[-1]
+
+
+@pytest.mark.parametrize("module, args, message", [
+    # a bad number, a non-finite number, a value out of range
+    ("experiments.theory", ["--eps", "nan"], "finite number >= 0"),
+    ("experiments.theory", ["--eps", "-5"], "finite number >= 0"),
+    ("experiments.theory", ["--delta", "0"], "(0, 1)"),
+    ("experiments.theory", ["--betas", "2"], "[0, 1]"),
+    ("experiments.theory", ["--mdps", "x"], "positive integer"),
+    ("experiments.adroit_door", ["--scale", "inf"], "finite number"),
+    ("experiments.adroit_door", ["--alpha", "nan"], "finite number"),
+    ("experiments.adroit_random_scores", ["--episodes", "1"], "integer >= 2"),
+    ("offrl_jax.datasets", ["generate", "hopper-medium", "--transitions", "0"], "positive integer"),
+    ("offrl_jax.datasets", ["generate", "hopper-medium", "--transitions", "-5"], "positive integer"),
+    ("benchmarks.throughput", ["--seeds", "0"], "positive integer"),
+    ("benchmarks.throughput", ["--transitions", "0"], "positive integer"),
+    ("benchmarks.throughput", ["--target-s", "nan"], "finite number > 0"),
+    ("benchmarks.throughput", ["--reps", "0"], "positive integer"),
+    ("experiments.mujoco_medium", ["--alpha", "inf"], "finite number"),
+    # a missing file
+    ("benchmarks.throughput", ["--markdown", "/nonexistent.jsonl"], "/nonexistent.jsonl"),
+    ("experiments.report", ["/nonexistent/run"], "/nonexistent/run"),
+    ("experiments.mujoco_medium", ["--config", "/nonexistent/config.json"], "/nonexistent/config.json"),
+])
+def test_entry_point_refuses_bad_values_in_one_line(module, args, message):
+    assert message in _one_line_error(module, *args)
+
+
+@pytest.mark.parametrize("module, args", [
+    ("experiments.theory", ["--mdps", "1", "--states", "3"]),
+    ("experiments.adroit_random_scores", ["--episodes", "2", "--envs", "door"]),
+    ("experiments.mujoco_medium", []),
+    ("benchmarks.throughput", ["--quick"]),
+    ("experiments.report", ["--merge"]),
+])
+def test_entry_point_refuses_an_unwritable_output_before_working(tmp_path, module, args):
+    blocker = tmp_path / "a-file"
+    blocker.write_text("not a directory")
+    out = blocker / "out"  # under a file: cannot be made
+    if module == "experiments.report":
+        line = _one_line_error(module, *args, str(out), str(tmp_path))
+    elif module == "benchmarks.throughput":
+        line = _one_line_error(module, *args, "--out", str(out / "x.jsonl"))
+    else:
+        line = _one_line_error(module, *args, "--out", str(out))
+    assert "a-file" in line and blocker.read_text() == "not a directory"
+
+
+def test_report_refuses_a_summary_that_is_not_one(tmp_path):
+    for text in ('{"a": 1}', "[1, 2]", "null", "not json"):
+        (tmp_path / "summary.json").write_text(text)
+        assert str(tmp_path / "summary.json") in _one_line_error("experiments.report", str(tmp_path))
+
+
+def test_datasets_generate_refuses_an_existing_dataset_without_overwrite(tmp_path):
+    out = tmp_path / "ds"
+    out.mkdir()
+    (out / "keep").write_text("x")
+    line = _one_line_error("offrl_jax.datasets", "generate", "hopper-medium", "--out", str(out))
+    assert "--overwrite" in line and (out / "keep").read_text() == "x"
+    (tmp_path / "file").write_text("x")
+    assert "is a file" in _one_line_error("offrl_jax.datasets", "generate", "hopper-medium", "--out",
+                                          str(tmp_path / "file"), "--overwrite")
