@@ -22,7 +22,7 @@ from pathlib import Path
 
 from offrl_jax import datasets
 from offrl_jax.checkpoint import atomic_write_text
-from offrl_jax.cli import OneLineParser, check_writable_dir, positive_int  # noqa: F401  (re-exported: the studies import them from here)
+from offrl_jax.cli import OneLineParser, check_writable_dir, lock_run_dir, positive_int  # noqa: F401  (re-exported: the studies import them from here)
 from offrl_jax.data.dataset import DatasetError
 from offrl_jax.results import print_table
 from offrl_jax.runner import Diverged, run_study
@@ -243,6 +243,7 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
             built = build(args)  # validates every hyper-parameter and budget
         out, replace = output_dir(args, parser.prog.split(".")[-1])
         check_writable_dir(out)  # before any data is loaded or generated
+        lock = lock_run_dir(out)  # noqa: F841  (held until the process ends: one writer per run directory)
         if args.resume is not None:
             built = saved_studies(out)
             if "updates" in given:

@@ -96,3 +96,20 @@ def check_writable_file(path: Path) -> None:
     if path.is_dir():
         raise OSError(f"{path} is a directory, not a file")
     check_writable_dir(path.parent if str(path.parent) else Path("."))
+
+
+def lock_run_dir(path: Path):
+    """Hold an OS lock (flock) on `path` for as long as the returned file stays open (the process's life): a second
+    process asking for the same run directory gets OSError at once.  The lock file sits beside the directory
+    (`.<name>.lock`), so it also covers a directory that --overwrite deletes and makes again."""
+    import fcntl
+
+    path = Path(path).resolve()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    handle = open(path.parent / f".{path.name}.lock", "a")  # noqa: SIM115  (kept open: it is the lock)
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        handle.close()
+        raise OSError(f"{path} is being written by another process; wait for it or choose another --out") from None
+    return handle

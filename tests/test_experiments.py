@@ -200,3 +200,20 @@ def test_debug_variable_shows_the_traceback(tmp_path):
     assert result.returncode == 2 and "Traceback" not in result.stderr
     result = cli("--lam", "1.5", "--out", tmp_path / "x", timeout=120, env=os.environ | {"OFFRL_JAX_DEBUG": "1"})
     assert result.returncode != 0 and "Traceback" in result.stderr and "lam = 1.5" in result.stderr
+
+
+def test_a_run_directory_has_one_writer(tmp_path, tiny_hdf5):
+    """While one process holds a run directory, a second one started on it (even with --overwrite, or --resume)
+    gets one line and exit 2, and writes nothing."""
+    from offrl_jax.cli import lock_run_dir
+
+    out = tmp_path / "run"
+    held = lock_run_dir(out)
+    try:
+        for extra in ([], ["--overwrite"]):
+            result = cli("--dataset-path", tiny_hdf5, "--out", out, *extra, *TINY, timeout=120)
+            assert result.returncode == 2 and "another process" in result.stderr.strip().splitlines()[-1]
+        assert not out.exists()
+    finally:
+        held.close()
+    cli("--dataset-path", tiny_hdf5, "--out", out, *TINY, check=True, timeout=600)  # free again
