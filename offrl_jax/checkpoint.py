@@ -16,11 +16,23 @@ from typing import Any
 from flax import serialization
 
 
+def _umask() -> int:
+    """The process's umask (read by setting and restoring it: call it where no other thread creates files)."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+_UMASK = _umask()  # once, at import, before any writer thread exists
+
+
 def atomic_write_bytes(path: str | Path, data: bytes) -> None:
+    """Write `path` all at once; its mode is what the umask gives a new file (mkstemp's own is 0600)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
+        os.fchmod(fd, 0o666 & ~_UMASK)
         with os.fdopen(fd, "wb") as f:
             f.write(data)
             f.flush()

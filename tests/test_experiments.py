@@ -217,3 +217,14 @@ def test_a_run_directory_has_one_writer(tmp_path, tiny_hdf5):
     finally:
         held.close()
     cli("--dataset-path", tiny_hdf5, "--out", out, *TINY, check=True, timeout=600)  # free again
+
+
+def test_written_files_follow_the_umask(tmp_path, monkeypatch):
+    import stat
+
+    from offrl_jax import checkpoint
+
+    for mask, mode in ((0o022, 0o644), (0o077, 0o600)):
+        monkeypatch.setattr(checkpoint, "_UMASK", mask)
+        checkpoint.atomic_write_text(tmp_path / "x.json", "{}")
+        assert stat.S_IMODE((tmp_path / "x.json").stat().st_mode) == mode
