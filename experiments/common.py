@@ -217,7 +217,7 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
     For --config: `hparam_dests` are the flags that set single hyper-parameters, and `hparams(args)` the overrides
     they make ({config field: value}, None for a flag not given)."""
     args = parser.parse_args(argv)
-    out, replace = None, False
+    out, replace, lock = None, False, None
     try:
         given = given_dests(parser, argv)
         if args.resume is not None and args.config is not None:
@@ -243,7 +243,7 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
             built = build(args)  # validates every hyper-parameter and budget
         out, replace = output_dir(args, parser.prog.split(".")[-1])
         check_writable_dir(out)  # before any data is loaded or generated
-        lock = lock_run_dir(out)  # noqa: F841  (held until the process ends: one writer per run directory)
+        lock = lock_run_dir(out)  # held until the end: one writer per run directory
         if args.resume is not None:
             built = saved_studies(out)
             if "updates" in given:
@@ -281,7 +281,17 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
         where = f"; resume with --resume {out}" if out is not None and (out / "config.json").is_file() else ""
         print(f"interrupted{where}", file=sys.stderr)
         return 130
-    finally:  # a claimed timestamped directory that got nothing (the data failed to load) is not left behind
+    finally:  # a claimed timestamped directory that got nothing (the data failed to load) is not left behind,
+        # nor its runs/<study>/ when that is empty then
         if out is not None and args.resume is None and args.out is None and out.is_dir() and not any(out.iterdir()):
             out.rmdir()
+        if lock is not None:
+            Path(lock.name).unlink(missing_ok=True)
+            lock.close()
+        if out is not None and args.out is None and args.resume is None:
+            for empty in (out.parent, out.parent.parent):
+                try:
+                    empty.rmdir()  # only if empty
+                except OSError:
+                    break
     return 0

@@ -228,3 +228,11 @@ def test_written_files_follow_the_umask(tmp_path, monkeypatch):
         monkeypatch.setattr(checkpoint, "_UMASK", mask)
         checkpoint.atomic_write_text(tmp_path / "x.json", "{}")
         assert stat.S_IMODE((tmp_path / "x.json").stat().st_mode) == mode
+
+
+def test_a_failed_run_leaves_no_empty_directories(tmp_path):
+    result = subprocess.run([sys.executable, "-m", "experiments.mujoco_medium", "--dataset-path",
+                             str(tmp_path / "missing.hdf5")], cwd=tmp_path, capture_output=True, text=True,
+                            timeout=120, env=os.environ | {"PYTHONPATH": str(ROOT)})
+    assert result.returncode == 2 and "missing.hdf5" in result.stderr
+    assert not (tmp_path / "runs").exists()
