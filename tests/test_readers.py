@@ -347,3 +347,44 @@ def test_validate_returns_float32(tmp_path):
     ds = read_d4rl_hdf5(write_h5(tmp_path / "d.hdf5", d4rl_arrays()))
     again = validate(ds, "x")
     assert all(getattr(again, f).dtype == np.float32 for f in ("observations", "actions", "rewards", "terminals"))
+
+
+@pytest.mark.parametrize("meta, fragment", [
+    ([1, 2], "not a JSON object"),
+    (None, "not a JSON object"),
+    ({"observation_space": 5}, "observation_space is not an object"),
+    ({"observation_space": "{not json"}, "observation_space is not valid JSON"),
+])
+def test_minari_metadata_that_is_not_an_object(minari_root, tmp_path, meta, fragment):
+    path = _copy_minari(minari_root, tmp_path)
+    (path / "data/metadata.json").write_text(json.dumps(meta))
+    with pytest.raises(DatasetError) as err:
+        read_minari(path)
+    assert_one_line(err, path, fragment)
+
+
+def test_minari_episode_that_is_not_a_group(minari_root, tmp_path):
+    path = _copy_minari(minari_root, tmp_path)
+    with h5py.File(path / "data/main_data.hdf5", "a") as f:
+        f["episode_99"] = np.zeros(3)
+    with pytest.raises(DatasetError) as err:
+        read_minari(path)
+    assert_one_line(err, path, "episode_99", "not an episode group")
+
+
+@pytest.mark.parametrize("field", ["rewards", "terminals", "timeouts"])
+def test_string_typed_arrays_name_the_file(tmp_path, field):
+    arrays = d4rl_arrays()
+    arrays[field] = np.array([b"1"] * len(arrays[field]))
+    path = write_h5(tmp_path / "hopper-strings.hdf5", arrays)
+    with pytest.raises(DatasetError) as err:
+        read_d4rl_hdf5(path)
+    assert_one_line(err, path, field, "not numbers")
+
+
+def test_zero_byte_npz_names_the_file(tmp_path):
+    path = tmp_path / "door.npz"
+    path.write_bytes(b"")
+    with pytest.raises(DatasetError) as err:
+        read_door_npz(path)
+    assert_one_line(err, path, "not a readable .npz file")

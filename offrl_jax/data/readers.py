@@ -44,6 +44,8 @@ def _as_float32(path, name: str, x: np.ndarray, ndim: int) -> np.ndarray:
         x = x[:, 0]
     if x.ndim != ndim:
         raise DatasetError(f"{path}: {name} has shape {x.shape}, expected {ndim} dimension(s)")
+    if x.dtype.kind not in "biuf":  # strings, bytes, objects: not numbers, whatever they would parse to
+        raise DatasetError(f"{path}: {name} holds {x.dtype} values, not numbers")
     return x.astype(np.float32)
 
 
@@ -219,11 +221,18 @@ def _read_minari_metadata(path: Path, data_dir: Path) -> dict:
         meta = json.loads((data_dir / "metadata.json").read_text())
     except (OSError, json.JSONDecodeError) as e:
         raise DatasetError(f"{path}: unreadable data/metadata.json ({e})") from None
+    if not isinstance(meta, dict):
+        raise DatasetError(f"{path}: data/metadata.json is not a JSON object")
     if meta.get("data_format", "hdf5") != "hdf5":
         raise DatasetError(f"{path}: Minari data_format '{meta['data_format']}' is not supported (only hdf5)")
     for key in ("observation_space", "action_space", "env_spec"):
         if isinstance(meta.get(key), str):
-            meta[key] = json.loads(meta[key])
+            try:
+                meta[key] = json.loads(meta[key])
+            except json.JSONDecodeError as e:
+                raise DatasetError(f"{path}: data/metadata.json: {key} is not valid JSON ({e})") from None
+        if meta.get(key) is not None and not isinstance(meta[key], dict):
+            raise DatasetError(f"{path}: data/metadata.json: {key} is not an object")
     for key in ("observation_space", "action_space"):
         kind = (meta.get(key) or {}).get("type", "Box")
         if kind != "Box":
@@ -265,6 +274,9 @@ def read_minari(path_or_id, env: str | None = None, clip_actions: bool = False) 
     try:
         with h5py.File(data_dir / "main_data.hdf5", "r") as f:
             names = sorted((k for k in f.keys() if k.startswith("episode_")), key=lambda k: int(k.split("_")[-1]))
+            for k in names:
+                if not isinstance(f[k], h5py.Group):
+                    raise DatasetError(f"{path}: {k} is not an episode group")
             episodes = [_read_minari_episode(path, k, f[k]) for k in names]
     except OSError as e:
         raise DatasetError(f"{path}: data/main_data.hdf5 is not a readable HDF5 file "
@@ -297,8 +309,8 @@ def read_door_npz(path, env: str = "door", clip_actions: bool = True) -> Dataset
     try:
         with np.load(path, allow_pickle=False) as z:
             data = {k: z[k] for k in z.files}
-    except (OSError, ValueError, zipfile.BadZipFile) as e:
-        raise DatasetError(f"{path}: not a readable .npz file ({e})") from None
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
+        raise DatasetError(f"{path}: not a readable .npz file ({e or type(e).__name__})") from None
     for key in ("observations", "actions", "rewards", "episode_lengths"):
         if key not in data:
             raise DatasetError(f"{path}: missing key '{key}' (found: {', '.join(sorted(data)) or 'none'})")
