@@ -22,7 +22,13 @@ from pathlib import Path
 
 from offrl_jax import datasets
 from offrl_jax.checkpoint import atomic_write_text
-from offrl_jax.cli import OneLineParser, check_writable_dir, lock_run_dir, positive_int  # noqa: F401  (re-exported: the studies import them from here)
+from offrl_jax.cli import (  # noqa: F401  (OneLineParser, positive_int: re-exported, the studies import them here)
+    OneLineParser,
+    check_writable_dir,
+    lock_run_dir,
+    one_line_warnings,
+    positive_int,
+)
 from offrl_jax.data.dataset import DatasetError
 from offrl_jax.results import print_table
 from offrl_jax.runner import Diverged, run_study
@@ -217,6 +223,7 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
     For --config: `hparam_dests` are the flags that set single hyper-parameters, and `hparams(args)` the overrides
     they make ({config field: value}, None for a flag not given)."""
     args = parser.parse_args(argv)
+    one_line_warnings()
     out, replace, lock = None, False, None
     try:
         given = given_dests(parser, argv)

@@ -113,3 +113,13 @@ def lock_run_dir(path: Path):
         handle.close()
         raise OSError(f"{path} is being written by another process; wait for it or choose another --out") from None
     return handle
+
+
+def one_line_warnings() -> None:
+    """Print Python warnings as one `warning: ...` line each (not Python's two lines with a source path)."""
+    import warnings
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        print(f"warning: {' '.join(str(message).split())}", file=sys.stderr if file is None else file)
+
+    warnings.showwarning = show

@@ -20,7 +20,7 @@ import tempfile
 import warnings
 from pathlib import Path
 
-from offrl_jax.cli import OneLineParser, check_writable_dir, positive_int
+from offrl_jax.cli import OneLineParser, check_writable_dir, one_line_warnings, positive_int
 from offrl_jax.data.dataset import Dataset, DatasetError, dataset_dir
 from offrl_jax.data.readers import load_dataset_path, minari_root, read_door_npz, read_minari
 from offrl_jax.envs import get_env_spec, normalized_score
@@ -196,13 +196,9 @@ def _list() -> None:
         print(f"{name:26s} {state:60s} {text}")
 
 
-def _one_line_warning(message, category, filename, lineno, file=None, line=None):
-    print(f"warning: {message}", file=sys.stderr)
-
-
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
-    warnings.showwarning = _one_line_warning
+    one_line_warnings()
     try:
         if args.command == "list":
             _list()

@@ -59,6 +59,9 @@ def evaluate(policy, states, env_name: str, episodes: int, seed: int = 0, num_se
     with ThreadPoolExecutor(workers) as threads:
         while active.any():
             actions = np.asarray(policy(states, obs.reshape(num_seeds, episodes, -1))).reshape(len(envs), -1)
+            # a diverged member's NaN actions would make MuJoCo warn on every step (and write MUJOCO_LOG.TXT);
+            # its returns are thrown away by the caller, so it steps with zeros instead
+            actions = np.nan_to_num(actions, nan=0.0, posinf=0.0, neginf=0.0)
             groups = np.array_split(np.flatnonzero(active), workers)
             list(threads.map(step, groups, [actions] * len(groups)))  # list(): wait, and raise a step's error
     return returns.reshape(num_seeds, episodes)

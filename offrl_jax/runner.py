@@ -153,7 +153,9 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
             if not alive.any():
                 record()
                 raise Diverged(f"{first_variant.algo} ({name}) diverged in phase {chunk.phase} for every seed by "
-                               f"update {chunk.update}; last good checkpoint: update {last_saved} in {ckpt_path}")
+                               f"update {chunk.update}; " + (f"last good checkpoint: update {last_saved} in "
+                                                             f"{ckpt_path}" if ckpt_path.exists() else
+                                                             "no checkpoint had been written"))
         tic = time.perf_counter()
         scores = evaluate_normalized(policy, chunk.states, study.env, study.eval_episodes).mean(axis=1)
         scores[~alive] = np.nan

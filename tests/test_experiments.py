@@ -236,3 +236,21 @@ def test_a_failed_run_leaves_no_empty_directories(tmp_path):
                             timeout=120, env=os.environ | {"PYTHONPATH": str(ROOT)})
     assert result.returncode == 2 and "missing.hdf5" in result.stderr
     assert not (tmp_path / "runs").exists()
+
+
+def test_warnings_print_as_one_line(capsys):
+    import warnings
+
+    from offrl_jax.cli import one_line_warnings
+
+    saved = warnings.showwarning
+    try:
+        one_line_warnings()
+        with warnings.catch_warnings():
+            warnings.simplefilter("always")
+            warnings.showwarning = warnings.showwarning  # catch_warnings restores it; keep ours inside
+            one_line_warnings()
+            warnings.warn("cached 'x' was generated capped\n   at 2,000 transitions", stacklevel=1)
+    finally:
+        warnings.showwarning = saved
+    assert capsys.readouterr().err == "warning: cached 'x' was generated capped at 2,000 transitions\n"

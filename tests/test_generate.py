@@ -223,3 +223,17 @@ def test_shipped_expert_behaves_like_an_expert(name):
     both, _ = build(f"{env}-medium-expert", transitions=2000, progress=False, num_envs=2)
     medium, _ = build(f"{env}-medium", transitions=1000, progress=False, num_envs=2)
     np.testing.assert_array_equal(both.observations[:1000], medium.observations)
+
+
+def test_scratch_folders_of_killed_generations_are_removed(tmp_path):
+    import os
+
+    from offrl_jax.data.generate import _remove_stale_scratch
+
+    dead = tmp_path / ".minari-tmp-hopper-medium-v0-999999999"
+    alive = tmp_path / f".minari-tmp-hopper-medium-v0-{os.getpid()}"
+    other = tmp_path / ".minari-tmp-walker2d-medium-v0-999999999"
+    for d in (dead, alive, other):
+        d.mkdir()
+    _remove_stale_scratch(tmp_path / "hopper-medium-v0")
+    assert not dead.exists() and alive.exists() and other.exists()
