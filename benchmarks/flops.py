@@ -149,3 +149,34 @@ def xla_update_flops(algo, phase, obs_dim: int, act_dim: int, batch: int = 256) 
     if isinstance(cost, list):
         cost = cost[0]
     return float(cost["flops"]) / k
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Print the matmul GFLOPs of one gradient update of every algorithm and phase, on hopper's dimensions."""
+    import argparse
+
+    from offrl_jax.algos import make_config
+    from offrl_jax.cli import OneLineParser, positive_int
+
+    p = OneLineParser(prog="python -m benchmarks.flops", description=__doc__,
+                      formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--batch", type=positive_int, default=256, help="minibatch rows (default %(default)s)")
+    p.add_argument("--obs-dim", type=positive_int, default=11, help="observation size (default: hopper's 11)")
+    p.add_argument("--act-dim", type=positive_int, default=3, help="action size (default: hopper's 3)")
+    p.add_argument("--num-critics", type=positive_int, default=10, help="EDAC ensemble size (default %(default)s)")
+    args = p.parse_args(argv)
+    cases = [("td3bc", {}, ("pretrain", "offline_rl")),
+             ("edac", {"num_critics": args.num_critics}, ("actor_pretrain", "critic_pretrain", "offline_rl"))]
+    print(f"{'algorithm':<10} {'phase':<16} {'GFLOP/update':>12}")
+    for algo, kw, phases in cases:
+        config = make_config(algo, "hopper", **kw)
+        for phase in phases:
+            flops, _ = update_flops(config, phase, args.obs_dim, args.act_dim, args.batch)
+            print(f"{algo:<10} {phase:<16} {flops / 1e9:>12.4f}")
+    return 0
+
+
+if __name__ == "__main__":
+    import sys
+
+    sys.exit(main())

@@ -14,6 +14,7 @@ process per variant on a GPU) into OUT, re-summarised across them (`offrl_jax.re
 """
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 from collections import defaultdict
@@ -60,7 +61,8 @@ def curve_table(curves: Path) -> str:
 
 
 def main(argv=None) -> int:
-    p = OneLineParser(prog="experiments.report", description=__doc__)
+    p = OneLineParser(prog="experiments.report", description=__doc__,
+                      formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("dirs", nargs="+", type=Path, help="run directories (or directories of studies)")
     p.add_argument("--curves", action="store_true", help="also the seed-mean score at every evaluation")
     p.add_argument("--merge", type=Path, metavar="OUT",
