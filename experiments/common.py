@@ -198,7 +198,7 @@ def extend(saved: Study | list[Study], updates: int) -> Study | list[Study]:
 
 def replay(saved: Study | list[Study], args, given: set[str], hparams: dict) -> Study | list[Study]:
     """The saved study (or studies) with the run flags in `given` and the hyper-parameters `hparams` replaced."""
-    swept = sorted(k for k, v in hparams.items() if isinstance(v, (list, tuple)) and k != "hidden")
+    swept = sorted(k for k, v in hparams.items() if isinstance(v, list))  # `config_values`: a sweep is a list
     if swept:
         raise UsageError(f"--config takes one value per hyper-parameter (got several for {', '.join(swept)}); "
                          "start a new run to sweep")

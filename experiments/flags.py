@@ -20,7 +20,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import inspect
-import math
 import re
 import types
 import typing
@@ -28,28 +27,15 @@ from typing import Any
 
 from offrl_jax.algos.edac import EDACConfig
 from offrl_jax.algos.td3bc import TD3BCConfig
+from offrl_jax.cli import number, positive_int
 
 CONFIGS = (TD3BCConfig, EDACConfig)
 # fields a study sets through its own flags or its algorithm choice, never one-by-one
 NOT_FLAGS = frozenset({"pretrain", "pretrain_updates", "pretrain_auto", "bc_only"})
+# the fields that have a flag (`add_config_flags` leaves out a study's `omit` too)
+FLAG_FIELDS = frozenset(f.name for cls in CONFIGS for f in dataclasses.fields(cls)) - NOT_FLAGS
 ALIASES = {"actor_layer_norm": ("--actor-ln",), "critic_layer_norm": ("--critic-ln",),
            "layer_norm_affine": ("--ln-affine",)}
-
-
-def finite_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got '{text}'") from None
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"expected a finite number, got '{text}'")
-    return value
-
-
-def _positive_int(text: str) -> int:
-    from experiments.common import positive_int
-
-    return positive_int(text)
 
 
 def field_comments(cls: type) -> dict[str, str]:
@@ -95,9 +81,9 @@ def _argument(annotation: Any, sweepable: bool) -> dict[str, Any]:
     if origin is typing.Literal:
         return {"choices": args}
     if origin is tuple:
-        kind = finite_float if args[0] is float else _positive_int
+        kind = number() if args[0] is float else positive_int
         return {"type": kind, "nargs": "+" if args[-1] is Ellipsis else len(args), "metavar": args[0].__name__.upper()}
-    kind = {int: int, float: finite_float, str: str}[annotation]
+    kind = {int: int, float: number(), str: str}[annotation]
     return {"type": kind} | ({"nargs": "+"} if sweepable else {})
 
 

@@ -17,11 +17,10 @@ See RESULTS.md for the measured wall-clock time and for what happens with longer
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import sys
 
 from experiments.common import OneLineParser, UsageError, main_guard, positive_int, run_args, study_fields
-from experiments.flags import CONFIGS, NOT_FLAGS, add_config_flags, config_values, sweepable_fields
+from experiments.flags import FLAG_FIELDS, add_config_flags, config_values, sweepable_fields
 from offrl_jax.algos import ALGOS, PRESETS, preset_values
 from offrl_jax.algos.edac import EDACConfig
 from offrl_jax.algos.td3bc import TD3BCConfig
@@ -89,15 +88,12 @@ def pretrain_budget(text: str) -> dict:
     return {"pretrain_updates": positive_int(text)}
 
 
-CONFIG_FIELDS = frozenset(name for cls in CONFIGS for name in (f.name for f in dataclasses.fields(cls))) - NOT_FLAGS
-
-
 def overrides(args) -> dict:
     """Config overrides from the flags (a flag not given, or omitted by the study, is left out)."""
-    return config_values(args, CONFIG_FIELDS) | (getattr(args, "pretrain_updates", None) or {})
+    return config_values(args, FLAG_FIELDS) | (getattr(args, "pretrain_updates", None) or {})
 
 
-HPARAM_DESTS = CONFIG_FIELDS | {"pretrain_updates"}  # the flags that set one hyper-parameter each
+HPARAM_DESTS = FLAG_FIELDS | {"pretrain_updates"}  # the flags that set one hyper-parameter each
 PRESET_FIXED = ("env", "algo", "level", "updates", "eval_every")  # what --preset paper sets itself
 
 
