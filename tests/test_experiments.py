@@ -121,6 +121,28 @@ def test_kill_and_resume_equals_uninterrupted_run(tmp_path, tiny_hdf5):
     assert (killed / "summary.json").exists() and (killed / "curves.png").exists()
 
 
+def test_ctrl_c_stops_the_worker_processes_and_the_run_resumes(tmp_path, tiny_hdf5):
+    """SIGINT to the parent alone (its two variants train in worker processes): it tells the workers to stop,
+    exits 130 with the resume command, and the resumed run equals an uninterrupted one."""
+    full, stopped = tmp_path / "full", tmp_path / "stopped"
+    cli("--dataset-path", tiny_hdf5, "--out", full, *TINY, check=True, timeout=600)
+    proc = subprocess.Popen([sys.executable, "-m", "experiments.mujoco_medium", "--dataset-path", str(tiny_hdf5),
+                             "--out", str(stopped), "--no-progress", *TINY], cwd=ROOT, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+    checkpoint = stopped / "checkpoints" / "pretrained.msgpack"
+    deadline = time.time() + 300
+    while not checkpoint.exists() and time.time() < deadline and proc.poll() is None:
+        time.sleep(0.05)
+    os.kill(proc.pid, signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert f"interrupted; resume with --resume {stopped}" in err and "Traceback" not in err
+    assert not (stopped / "summary.json").exists()
+    result = cli("--resume", stopped, "--no-progress", timeout=600)
+    assert result.returncode == 0, result.stderr
+    assert curves_without_time(stopped / "curves.csv") == curves_without_time(full / "curves.csv")
+
+
 def test_divergence_stops_cleanly_and_keeps_checkpoint(tmp_path, tiny_hdf5):
     out = tmp_path / "nan"
     # BC pre-training is fine; the exploding critic learning rate blows up the offline-RL phase

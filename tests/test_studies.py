@@ -161,7 +161,7 @@ def test_a_failing_parallel_variant_stops_the_others_at_once(tmp_path, monkeypat
                   variants=(Variant.of("slow", "td3bc", pretrain="none"), Variant.of("fast", "cql")))
     tic = time.monotonic()
     with pytest.raises(RuntimeError, match="fast failed"):
-        run_study(study, tmp_path, tiny_dataset, progress=False, parallel=2)
+        run_study(study, tmp_path, tiny_dataset, progress=False, parallel=2, processes=False)
     assert time.monotonic() - tic < 30
 
 
