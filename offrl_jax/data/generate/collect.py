@@ -12,9 +12,7 @@ from __future__ import annotations
 
 import json
 import math
-import os
 from collections.abc import Callable, Iterator
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -146,47 +144,33 @@ def rollout_episodes(
     }
     lengths = np.zeros(num_envs, np.int64)
     obs = np.stack([env.reset(seed=seed * 10_000 + i)[0] for i, env in enumerate(envs)]).astype(np.float32)
-    ended = np.zeros(num_envs, np.int8)  # after a step: 0 running, 1 terminated, 2 truncated or at the horizon
-
-    def step(indices: np.ndarray, actions: np.ndarray) -> None:
-        for i in indices:
-            t = lengths[i]
-            next_obs, reward, terminated, truncated, info = envs[i].step(actions[i])
-            buf["observations"][i, t] = obs[i]
-            buf["actions"][i, t] = actions[i]
-            buf["rewards"][i, t] = reward
-            buf["next_observations"][i, t] = next_obs
-            for key in info_keys:
-                buf[key][i, t] = info.get(key, 0)
-            lengths[i] = t + 1
-            ended[i] = 1 if terminated else 2 if truncated or t + 1 >= horizon else 0
-            obs[i] = next_obs
-
-    # MuJoCo releases the GIL inside mj_step (about half of a hopper step), so threads step the envs faster; each
-    # env is stepped by one thread in order and finished episodes are handed out in env order, so the data does not
-    # depend on the number of threads
-    workers = max(1, min(os.cpu_count() or 1, num_envs))
-    groups = np.array_split(np.arange(num_envs), workers)
-    threads = ThreadPoolExecutor(workers) if workers > 1 else None
     try:
         while True:
             actions = np.asarray(act(obs), dtype=np.float32)
-            if threads is None:
-                step(groups[0], actions)
-            else:
-                list(threads.map(step, groups, [actions] * workers))  # list(): wait, and raise a step's error
-            for i in np.flatnonzero(ended):
-                n = int(lengths[i])
-                episode = {k: v[i, :n].copy() for k, v in buf.items()}
-                episode["terminals"] = np.zeros(n, np.float32)
-                episode["timeouts"] = np.zeros(n, np.float32)
-                episode["terminals" if ended[i] == 1 else "timeouts"][-1] = 1.0
-                yield int(i), episode
-                lengths[i], ended[i] = 0, 0
-                obs[i] = envs[i].reset()[0]
+            for i, env in enumerate(envs):
+                t = lengths[i]
+                next_obs, reward, terminated, truncated, info = env.step(actions[i])
+                buf["observations"][i, t] = obs[i]
+                buf["actions"][i, t] = actions[i]
+                buf["rewards"][i, t] = reward
+                buf["next_observations"][i, t] = next_obs
+                for key in info_keys:
+                    buf[key][i, t] = info.get(key, 0)
+                lengths[i] = t + 1
+                if terminated or truncated or t + 1 >= horizon:
+                    n = t + 1
+                    episode = {k: v[i, :n].copy() for k, v in buf.items()}
+                    episode["terminals"] = np.zeros(n, np.float32)
+                    episode["timeouts"] = np.zeros(n, np.float32)
+                    if terminated:
+                        episode["terminals"][-1] = 1.0
+                    else:
+                        episode["timeouts"][-1] = 1.0
+                    yield i, episode
+                    lengths[i] = 0
+                    next_obs, _ = env.reset()
+                obs[i] = next_obs
     finally:
-        if threads is not None:
-            threads.shutdown()
         for env in envs:
             env.close()
 
