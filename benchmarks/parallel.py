@@ -26,7 +26,7 @@ import sys
 import threading
 import time
 
-from offrl_jax.cli import positive_int
+from offrl_jax.cli import OneLineParser, positive_int
 from offrl_jax.workers import SINGLE_THREAD_XLA, core_sets
 
 CASES = ("threads", "threads-1t", "processes", "pinned-1t", "alone")
@@ -88,11 +88,18 @@ def run_case(case: str, args) -> float:
         if case == "pinned-1t":
             command = ["taskset", "-c", ",".join(map(str, cores[i % len(cores)]))] + command
         children.append(subprocess.Popen(command, env=env, stdout=subprocess.PIPE, text=True))
-    return sum(float(child.communicate()[0].strip().splitlines()[-1]) for child in children)
+    total = 0.0
+    for child in children:
+        out = child.communicate()[0].strip().splitlines()
+        if child.returncode != 0 or not out:
+            raise RuntimeError(f"case {case}: a timing process failed (exit code {child.returncode})")
+        total += float(out[-1])
+    return total
 
 
 def main(argv: list[str] | None = None) -> None:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = OneLineParser(prog="python -m benchmarks.parallel", description=__doc__,
+                      formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--cases", nargs="+", choices=CASES, default=list(CASES))
     p.add_argument("--variants", type=positive_int, default=2, help="variants trained at once")
     p.add_argument("--seeds", type=positive_int, default=3, help="vmapped seeds per variant")
@@ -107,7 +114,10 @@ def main(argv: list[str] | None = None) -> None:
         print(_time_programs(int(args.child[0]), args.seeds, args.calls, args.transitions, float(args.child[1])))
         return
     for case in args.cases:
-        rate = run_case(case, args)
+        try:
+            rate = run_case(case, args)
+        except RuntimeError as e:
+            p.error(str(e))
         record = {"case": case, "variants": 1 if case == "alone" else args.variants, "seeds": args.seeds,
                   "updates_per_s": round(rate, 1), "load1": round(os.getloadavg()[0], 2)}
         print(json.dumps(record) if args.json else f"{case:12s} {record['variants']} x {args.seeds} seeds: "

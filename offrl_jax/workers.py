@@ -1,28 +1,33 @@
 """Variants trained at once in worker processes, each pinned to its own CPU core(s).
 
 At these network sizes one XLA program keeps about one core busy, so `--parallel 2` trains two variants at once.
-On the idle 2-core machine, two processes each pinned to one core with single-threaded XLA run 20 % more updates
-per second than two threads of one process (321 vs 267 TD3+BC updates/s for two 3-seed variants; measured in
-benchmarks/README.md, "Two variants at once").  Results do not depend on where a variant runs: each variant's
-randomness is its own.
+On the idle 2-core machine, two processes each pinned to one core with single-threaded XLA ran 10-20 % more
+updates per second than two threads of one process (benchmarks/README.md, "Two variants at once").  Results do
+not depend on where a variant runs: each variant's randomness is its own.
 
 A worker gets its task by pickling (the dataset included), runs `target(*task, bar, recorder)` and sends back, on
-one queue, what the threads used to share: rows for curves.csv, progress, messages, and its result or its error.
-The parent owns curves.csv, the progress bar and the run directory's lock; a worker stops at its next chunk
-boundary when told to (another variant failed, Ctrl-C) or when the parent is gone.
+its own pipe, what the threads used to share: rows for curves.csv, progress, messages, and its result or its
+error.  The parent owns curves.csv, the progress bar and the run directory's lock.  Workers ignore SIGINT: on
+Ctrl-C (or when a variant fails) the parent tells them to stop, and they stop at their next chunk boundary; one
+still busy after 30 s is terminated (its last checkpoint stays).  A worker whose parent is gone stops too.
 """
 from __future__ import annotations
 
+import contextlib
 import multiprocessing
 import os
-import queue as queues
+import pickle
+import signal
 import sys
+import threading
 import time
 import traceback
 from collections.abc import Callable
+from multiprocessing.connection import wait
 from typing import Any
 
-SINGLE_THREAD_XLA = "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"
+SINGLE_THREAD_XLA = "--xla_cpu_multi_thread_eigen=false"
+STOP_GRACE_S = 30.0
 
 
 def core_sets(parallel: int) -> list[list[int]]:
@@ -33,19 +38,19 @@ def core_sets(parallel: int) -> list[list[int]]:
 
 
 class _Bar:
-    """The worker's stand-in for the parent's tqdm bar."""
+    """The worker's stand-in for the parent's progress bar."""
 
-    def __init__(self, queue):
-        self.queue = queue
+    def __init__(self, conn):
+        self.conn = conn
 
     def update(self, n: int) -> None:
-        self.queue.put(("update", n))
+        self.conn.send(("update", n))
 
     def set_postfix_str(self, text: str) -> None:
-        self.queue.put(("postfix", text))
+        self.conn.send(("postfix", text))
 
     def write(self, text: str, file=None) -> None:
-        self.queue.put(("write", text))
+        self.conn.send(("write", text))
 
 
 class _Stop:
@@ -61,103 +66,155 @@ class _Stop:
 class _Recorder:
     """The worker's stand-in for the parent's recorder: rows go to the parent, which writes curves.csv."""
 
-    def __init__(self, queue, stop: _Stop):
-        self.queue, self.stop = queue, stop
+    def __init__(self, conn, stop: _Stop):
+        self.conn, self.stop = conn, stop
 
     def set(self, rows_by_label: dict[str, list[dict]]) -> None:
-        self.queue.put(("rows", rows_by_label))
+        self.conn.send(("rows", rows_by_label))
 
 
 def _die_with_parent() -> None:
     """Linux: the kernel kills this worker when its parent dies, so no orphan writes a run after the lock is gone."""
     try:
         import ctypes
-        import signal
 
         ctypes.CDLL(None).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
     except (OSError, AttributeError):
         pass
 
 
-def _worker(index: int, target: Callable, task: tuple, cores: list[int], queue, stop, parent: int) -> None:
+def portable_error(e: BaseException) -> BaseException:
+    """`e` if it survives pickling, else an error of its broad kind (ValueError, OSError, RuntimeError) with its
+    text, so that the parent reports it the same way (the CLI maps kinds to exit codes)."""
+    try:
+        pickle.loads(pickle.dumps(e))
+        return e
+    except Exception:  # noqa: BLE001 -- whatever pickling raises, the text still goes
+        kind = next(k for k in (KeyboardInterrupt, ValueError, OSError, RuntimeError, BaseException)
+                    if isinstance(e, k))
+        return kind(f"{type(e).__name__}: {e}")
+
+
+def _worker(index: int, target: Callable, task: tuple, cores: list[int], conn, stop, parent: int) -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides when to stop (see the module doc)
     _die_with_parent()
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, cores)
     if len(cores) == 1:  # before JAX starts its backend; a user's own XLA_FLAGS come last and win
         os.environ["XLA_FLAGS"] = f"{SINGLE_THREAD_XLA} {os.environ.get('XLA_FLAGS', '')}".strip()
     try:
-        result = target(*task, _Bar(queue), _Recorder(queue, _Stop(stop, parent)))
-        queue.put(("done", index, result))
+        result = target(*task, _Bar(conn), _Recorder(conn, _Stop(stop, parent)))
+        conn.send(("done", result))
     except BaseException as e:  # noqa: BLE001 -- every error goes to the parent, which decides
         if os.environ.get("OFFRL_JAX_DEBUG") == "1":
             traceback.print_exc()
-        try:
-            queue.put(("error", index, e))
-        except Exception:  # an error that does not pickle still reaches the parent, as its text
-            queue.put(("error", index, RuntimeError(f"{type(e).__name__}: {e}")))
+        conn.send(("error", portable_error(e)))
+    finally:
+        conn.close()
+
+
+@contextlib.contextmanager
+def _sigint_ignored():
+    if threading.current_thread() is not threading.main_thread():  # signal handlers belong to the main thread
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _exit_text(code: int | None) -> str:
+    if code is not None and code < 0:
+        name = signal.Signals(-code).name if -code in signal.valid_signals() else str(-code)
+        return f"killed by {name}" + (" (out of memory?)" if -code == signal.SIGKILL else "")
+    return f"exit code {code}"
 
 
 def run_in_processes(target: Callable, tasks: list[tuple], parallel: int, bar, recorder,
                      on_done: Callable[[int, Any], None]) -> None:
     """Run `target(*task, bar, recorder)` for every task, `parallel` at a time, each in a process pinned to its own
-    cores; `on_done(index, result)` in the parent as each ends.  The first error stops the others at their next
-    chunk boundary and is raised here once they have stopped (Ctrl-C likewise)."""
+    cores; `on_done(index, result)` in the parent as each ends.  The first error tells the others to stop at their
+    next chunk boundary and is raised here once they have (Ctrl-C likewise); a worker that dies without a word
+    raises ChildProcessError."""
     ctx = multiprocessing.get_context("spawn")  # a fresh interpreter: JAX must not be forked
-    queue, stop = ctx.Queue(), ctx.Event()
-    free, pending, running = core_sets(parallel), list(enumerate(tasks)), {}
+    stop = ctx.Event()
+    free, pending = core_sets(parallel), list(enumerate(tasks))
+    running: dict[int, tuple[Any, Any, list[int]]] = {}  # index -> (process, its pipe's reading end, cores)
     error: BaseException | None = None
+    deadline: float | None = None  # after a stop request: when the workers still running are terminated
 
-    def handle(message: tuple) -> None:
-        nonlocal error
-        kind = message[0]
-        if kind == "update":
-            bar.update(message[1])
-        elif kind == "postfix":
-            bar.set_postfix_str(message[1])
-        elif kind == "write":
-            bar.write(message[1], file=sys.stderr)
-        elif kind == "rows":
-            recorder.set(message[1])
+    def fail(e: BaseException) -> None:
+        nonlocal error, deadline
+        if error is None:
+            error, deadline = e, time.monotonic() + STOP_GRACE_S
+            stop.set()
+
+    def finish(index: int, outcome: tuple | None) -> None:
+        """The worker `index` ended: with ("done", result), ("error", e), or without a word (None)."""
+        process, conn, cores = running.pop(index)
+        conn.close()
+        process.join(timeout=10)
+        free.append(cores)
+        if outcome is None:
+            fail(ChildProcessError(f"a worker process ended without a result ({_exit_text(process.exitcode)})"))
+        elif outcome[0] == "done":
+            on_done(index, outcome[1])
         else:
-            index, value = message[1], message[2]
-            process, cores = running.pop(index)
-            process.join()
-            free.append(cores)
-            if kind == "done":
-                on_done(index, value)
-            elif error is None:
-                error = value
-                stop.set()
+            fail(outcome[1])
+
+    def serve(index: int) -> None:
+        """Handle every message waiting on worker `index`'s pipe; notice its end."""
+        _, conn, _ = running[index]
+        try:
+            while conn.poll():
+                message = conn.recv()
+                kind = message[0]
+                if kind == "update":
+                    bar.update(message[1])
+                elif kind == "postfix":
+                    bar.set_postfix_str(message[1])
+                elif kind == "write":
+                    bar.write(message[1], file=sys.stderr)
+                elif kind == "rows":
+                    recorder.set(message[1])
+                else:
+                    return finish(index, message)
+        except (EOFError, OSError, pickle.UnpicklingError):  # the pipe closed (or broke) before a result came
+            return finish(index, None)
 
     try:
         while running or (pending and error is None):
             while pending and free and error is None:
                 index, task = pending.pop(0)
                 cores = free.pop(0)
-                process = ctx.Process(target=_worker, args=(index, target, task, cores, queue, stop, os.getpid()),
+                receive, send = ctx.Pipe(duplex=False)
+                process = ctx.Process(target=_worker, args=(index, target, task, cores, send, stop, os.getpid()),
                                       daemon=True)
-                process.start()
-                running[index] = (process, cores)
+                with _sigint_ignored():  # inherited: the worker ignores Ctrl-C from its first instruction
+                    process.start()
+                send.close()  # the worker holds the only writing end: its death closes the pipe
+                running[index] = (process, receive, cores)
+            ready = wait([conn for _, conn, _ in running.values()], timeout=1.0)
+            for index in [i for i, (_, conn, _) in list(running.items()) if conn in ready]:
+                serve(index)
+            if deadline is not None and time.monotonic() > deadline:
+                for process, _, _ in running.values():
+                    process.terminate()
+    except KeyboardInterrupt:  # Ctrl-C in the parent: the workers stop at their next chunk boundary
+        fail(KeyboardInterrupt())
+        bar.write("interrupted: stopping the worker processes at their next chunk boundary", file=sys.stderr)
+        while running:
             try:
-                handle(queue.get(timeout=1.0))
-            except queues.Empty:
-                for index, (process, _) in list(running.items()):
-                    if process.exitcode is not None:  # killed without a word (out of memory, a signal)
-                        handle(("error", index, RuntimeError(
-                            f"a worker process ended without a result (exit code {process.exitcode})")))
-    except BaseException:  # Ctrl-C in the parent: the workers stop too (they also got the signal on a terminal)
-        stop.set()
-        deadline = time.monotonic() + 30
-        while any(p.is_alive() for p, _ in running.values()) and time.monotonic() < deadline:
-            try:  # keep reading, so that no worker blocks on a full pipe; their rows still reach curves.csv
-                message = queue.get(timeout=0.2)
-                if message[0] == "rows":
-                    recorder.set(message[1])
-            except queues.Empty:
-                pass
-        for process, _ in running.values():
-            if process.is_alive():
-                process.terminate()
-        raise
+                ready = wait([conn for _, conn, _ in running.values()], timeout=1.0)
+                for index in [i for i, (_, conn, _) in list(running.items()) if conn in ready]:
+                    serve(index)
+                if time.monotonic() > deadline:
+                    for process, _, _ in running.values():
+                        process.terminate()
+            except KeyboardInterrupt:  # a second Ctrl-C: stop now
+                for process, _, _ in running.values():
+                    process.terminate()
     if error is not None:
         raise error

@@ -122,8 +122,9 @@ def test_kill_and_resume_equals_uninterrupted_run(tmp_path, tiny_hdf5):
 
 
 def test_ctrl_c_stops_the_worker_processes_and_the_run_resumes(tmp_path, tiny_hdf5):
-    """SIGINT to the parent alone (its two variants train in worker processes): it tells the workers to stop,
-    exits 130 with the resume command, and the resumed run equals an uninterrupted one."""
+    """Ctrl-C as a terminal sends it (SIGINT to the whole process group; the two variants train in worker
+    processes): the parent tells the workers to stop, exits 130 with the resume command and no traceback, and the
+    resumed run equals an uninterrupted one."""
     full, stopped = tmp_path / "full", tmp_path / "stopped"
     cli("--dataset-path", tiny_hdf5, "--out", full, *TINY, check=True, timeout=600)
     proc = subprocess.Popen([sys.executable, "-m", "experiments.mujoco_medium", "--dataset-path", str(tiny_hdf5),
@@ -133,7 +134,7 @@ def test_ctrl_c_stops_the_worker_processes_and_the_run_resumes(tmp_path, tiny_hd
     deadline = time.time() + 300
     while not checkpoint.exists() and time.time() < deadline and proc.poll() is None:
         time.sleep(0.05)
-    os.kill(proc.pid, signal.SIGINT)
+    os.killpg(proc.pid, signal.SIGINT)
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 130, err
     assert f"interrupted; resume with --resume {stopped}" in err and "Traceback" not in err

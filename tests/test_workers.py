@@ -54,6 +54,32 @@ def vanish(label, bar, recorder):
     os._exit(7)
 
 
+class Unpicklable(ValueError):
+    def __reduce__(self):
+        raise TypeError("not picklable")
+
+
+class Custom(RuntimeError):
+    """Like runner.Diverged: a module-level subclass whose type the CLI reads."""
+
+
+def raise_kind(label, bar, recorder):
+    raise Unpicklable("a lock inside") if label == "unpicklable" else Custom("every seed diverged")
+
+
+def killed_or_chatty(label, bar, recorder):
+    import signal
+
+    if label == "killed":
+        time.sleep(0.5)
+        os.kill(os.getpid(), signal.SIGKILL)
+    deadline = time.monotonic() + 60
+    while not recorder.stop.is_set() and time.monotonic() < deadline:
+        bar.update(1)  # a busy neighbour: messages keep coming
+        time.sleep(0.01)
+    return "stopped"
+
+
 def test_core_sets_deal_every_core_once():
     cores = sorted(os.sched_getaffinity(0))
     for parallel in (1, 2, 3, 8):
@@ -85,8 +111,22 @@ def test_a_failing_worker_stops_the_others_and_its_error_is_raised():
 
 
 def test_a_worker_that_dies_without_a_word_is_an_error():
-    with pytest.raises(RuntimeError, match="ended without a result"):
+    with pytest.raises(ChildProcessError, match="ended without a result \\(exit code 7\\)"):
         run_in_processes(vanish, [("x",)], 1, Bar(), Recorder(), lambda i, r: None)
+
+
+def test_a_killed_worker_is_noticed_while_another_keeps_talking():
+    tic = time.monotonic()
+    with pytest.raises(ChildProcessError, match="killed by SIGKILL"):
+        run_in_processes(killed_or_chatty, [("chatty",), ("killed",)], 2, Bar(), Recorder(), lambda i, r: None)
+    assert time.monotonic() - tic < 45
+
+
+def test_errors_keep_their_kind_even_when_they_do_not_pickle():
+    with pytest.raises(Custom, match="every seed diverged"):
+        run_in_processes(raise_kind, [("custom",)], 1, Bar(), Recorder(), lambda i, r: None)
+    with pytest.raises(ValueError, match="Unpicklable: a lock inside"):
+        run_in_processes(raise_kind, [("unpicklable",)], 1, Bar(), Recorder(), lambda i, r: None)
 
 
 def test_more_tasks_than_workers_all_run():
