@@ -30,7 +30,10 @@ from offrl_jax.cli import (  # noqa: F401  (OneLineParser, positive_int: re-expo
     positive_int,
 )
 from offrl_jax.data.dataset import DatasetError
+from offrl_jax.loggers import LOGGERS
+from offrl_jax.provenance import fingerprint
 from offrl_jax.results import print_table
+from offrl_jax.resume import check_resume
 from offrl_jax.runner import Diverged, run_study
 from offrl_jax.study import Study, Variant
 
@@ -74,7 +77,12 @@ def run_args(parser: argparse.ArgumentParser, updates: int | None, eval_every: i
                    help="variants trained at once (default %(default)s: one XLA program at these sizes keeps about "
                         "one CPU core busy); on the CPU each in a process pinned to its own core(s), on a GPU in "
                         "threads; 1 = one after another")
-    g.add_argument("--no-progress", action="store_true", help="no progress bar")
+    g.add_argument("--no-progress", action="store_true",
+                   help="no progress bar: one plain line per evaluation instead (for batch logs)")
+    g.add_argument("--logger", choices=LOGGERS, default=None,
+                   help="also send every evaluation's scores and metrics to TensorBoard (RUN/tensorboard/) or "
+                        "Weights & Biases; curves.csv stays the record (pip install -e \".[tensorboard]\" or "
+                        "\".[wandb]\")")
 
 
 def output_dir(args, study_name: str) -> tuple[Path, bool]:
@@ -167,11 +175,11 @@ def _data_key(study: Study) -> tuple:
 
 
 _UNSET = object()
-RESUME_FLAGS = frozenset({"resume", "updates", "parallel", "no_progress", "clip_actions"})
+RESUME_FLAGS = frozenset({"resume", "updates", "parallel", "no_progress", "clip_actions", "logger"})
 # run flag destination -> the Study field it sets (seeds and --dataset-path are mapped in `replay`)
 RUN_FIELDS = ("updates", "eval_every", "eval_episodes", "batch_size", "checkpoint_every", "max_transitions",
               "clip_actions")
-REPLAY_FLAGS = frozenset({"config", "out", "overwrite", "parallel", "no_progress", "seeds", "seed_offset",
+REPLAY_FLAGS = frozenset({"config", "out", "overwrite", "parallel", "no_progress", "logger", "seeds", "seed_offset",
                           "dataset_path", *RUN_FIELDS})
 
 
@@ -228,6 +236,12 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
     out, replace, lock = None, False, None
     try:
         given = given_dests(parser, argv)
+        if args.logger is not None:  # its writer must be there before anything is written
+            import importlib.util
+
+            module = {"tensorboard": "tensorboardX", "wandb": "wandb"}[args.logger]
+            if importlib.util.find_spec(module) is None:
+                raise UsageError(f"--logger {args.logger} needs {module}: pip install -e \".[{args.logger}]\"")
         if args.resume is not None and args.config is not None:
             raise UsageError("--resume and --config exclude each other: --resume continues a run in place, "
                              "--config starts a new one from its settings")
@@ -256,8 +270,6 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
             built = saved_studies(out)
             if "updates" in given:
                 built = extend(built, args.updates)
-                if isinstance(built, list):
-                    atomic_write_text(out / "config.json", studies_json(built))
         studies = built if isinstance(built, list) else [built]
         loaded: dict = {}  # bad data fails here, before anything is written; each dataset is loaded once
         for study in studies:
@@ -268,6 +280,13 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
             if study.batch_size > len(ds):
                 raise UsageError(f"--batch-size {study.batch_size} is larger than the dataset ({len(ds):,} "
                                  f"transitions of {study.dataset})")
+        if args.resume is not None:  # every study's checkpoints must be its own, before anything is written
+            for study, ds in zip(studies, data):
+                study_out = out / study.name if isinstance(built, list) else out
+                if (study_out / "checkpoints").is_dir():
+                    check_resume(study, study_out, ds, fingerprint(ds))
+            if "updates" in given and isinstance(built, list):
+                atomic_write_text(out / "config.json", studies_json(built))
         if replace:
             shutil.rmtree(out)
         if isinstance(built, list) and args.resume is None:
@@ -277,7 +296,7 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
             study_out = out / study.name if isinstance(built, list) else out
             print(f"{study.name}: {len(ds):,} transitions of {study.dataset}; writing to {study_out}", file=sys.stderr)
             summary = run_study(study, study_out, ds, resume=args.resume is not None, progress=not args.no_progress,
-                                parallel=args.parallel)
+                                parallel=args.parallel, logger=args.logger)
             print_table(summary)
             print(f"results: {study_out}/summary.json, curves.csv, curves.png", file=sys.stderr)
     except (UsageError, DatasetError, ValueError, OSError, Diverged) as e:

@@ -148,7 +148,7 @@ def test_a_failing_parallel_variant_stops_the_others_at_once(tmp_path, monkeypat
     from offrl_jax.runner import Stopped, run_study
     from offrl_jax.study import Study, Variant
 
-    def fake_group(study, group, swept, ds, out_dir, resume, bar, recorder):
+    def fake_group(study, group, swept, ds, data_sha256, out_dir, resume, bar, recorder):
         if group[0].label == "slow":
             deadline = time.monotonic() + 60
             while not recorder.stop.is_set() and time.monotonic() < deadline:

@@ -1,0 +1,138 @@
+"""A resume continues the run its files belong to, or changes nothing.
+
+Every checkpoint carries the identity of what made it: the group's variants and resolved configs, the seeds, the
+batch size and the dataset's SHA-256 (`group_identity`).  Before a resumed study writes anything, `check_resume`
+reads every group's checkpoint and refuses, with one line, one that
+
+- was made by another run (its identity differs: another config.json, other hidden sizes, other data; the
+  message names what differs, and a config field added to the code since is no difference at its default),
+- holds states of other shapes than the study's networks (checkpoints saved before identities were stored are
+  checked this way only),
+- is past the study's budget or holds rows of variants that are not its own;
+
+and reports a variant that has evaluations in curves.csv but no checkpoint (it starts again from update 0: its rows
+are made again, identically, from the same seeds).
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+import jax
+import numpy as np
+from flax import serialization
+
+from offrl_jax.algos import make_algorithm, make_config
+from offrl_jax.driver import INIT, seed_keys
+from offrl_jax.results import read_curves
+from offrl_jax.study import Study, Variant, sweep_groups
+
+
+class ResumeMismatch(ValueError):
+    """The files of a run directory do not belong together; nothing was changed."""
+
+
+def checkpoint_path(out_dir: Path, group: tuple[Variant, ...], which: str = "last") -> Path:
+    """checkpoints/<labels>.msgpack: a group's last complete chunk (what --resume continues); with which="best",
+    checkpoints/<label>.best.msgpack: one variant's seeds at its best seed-mean evaluation so far."""
+    if which == "best":
+        return out_dir / "checkpoints" / f"{group[0].label}.best.msgpack"
+    return out_dir / "checkpoints" / f"{'+'.join(v.label for v in group)}.msgpack"
+
+
+def group_identity(study: Study, group: tuple[Variant, ...], data_sha256: str) -> dict[str, Any]:
+    """What a group's checkpoint depends on (not the budget, which a resume may extend), as JSON-ready data."""
+    resolved = study.resolved()
+    identity = {"variants": [[v.label, v.algo, [list(o) for o in v.overrides]] for v in group],
+                "resolved": [resolved[v.label] for v in group], "seeds": list(study.seeds),
+                "batch_size": study.batch_size, "env": study.env, "data": data_sha256}
+    return json.loads(json.dumps(identity, default=list))  # tuples as lists, as they come back from a file
+
+
+def identity_differences(saved: dict[str, Any], current: dict[str, Any], config_defaults: list[dict]) -> list[str]:
+    """What differs between a checkpoint's identity and the study's, by name.  A config field the checkpoint does
+    not know (added to the code since) is no difference while the study keeps its default."""
+    names = {"variants": "variants", "seeds": "seeds", "batch_size": "batch size", "env": "env",
+             "data": "dataset (SHA-256)"}
+    found = [name for key, name in names.items() if saved.get(key) != current.get(key)]
+    for j, (old, new) in enumerate(zip(saved.get("resolved", []), current["resolved"])):
+        label = current["variants"][j][0]
+        for key in sorted(set(old) | set(new)):
+            if key not in old and new[key] == config_defaults[j].get(key):
+                continue
+            if old.get(key, "(absent)") != new.get(key, "(absent)"):
+                found.append(f"{label}: {key} {old.get(key, '(absent)')!r} -> {new.get(key, '(absent)')!r}")
+    return found
+
+
+def state_shapes(study: Study, group: tuple[Variant, ...], obs_dim: int, act_dim: int, rows: int) -> Any:
+    """The state-dict of shapes (no arrays are made) that the group's checkpoint must have."""
+    config = make_config(group[0].algo, study.env, study.dataset, **dict(group[0].overrides))
+    algo = make_algorithm(config, obs_dim, act_dim, rows)
+    members = tuple(s for _ in group for s in study.seeds)
+    shapes = jax.eval_shape(jax.vmap(algo.init), seed_keys(members, INIT, 0))
+    return serialization.to_state_dict(shapes)
+
+
+def shape_mismatch(expected: Any, found: Any, where: str = "") -> str | None:
+    """The first leaf where two state dicts differ in structure or shape, as text; None when they agree."""
+    if isinstance(expected, dict):
+        if not isinstance(found, dict) or set(expected) != set(found):
+            missing = sorted(set(expected) - set(found)) if isinstance(found, dict) else ["(not a mapping)"]
+            extra = sorted(set(found) - set(expected)) if isinstance(found, dict) else []
+            return f"{where or '/'}: expected entries {missing[:3]} not found" if missing else \
+                f"{where or '/'}: unexpected entries {extra[:3]}"
+        for key in expected:
+            problem = shape_mismatch(expected[key], found[key], f"{where}/{key}")
+            if problem:
+                return problem
+        return None
+    shape = tuple(np.shape(found))
+    return None if shape == tuple(expected.shape) else f"{where}: shape {shape}, expected {tuple(expected.shape)}"
+
+
+def check_resume(study: Study, out_dir: Path, ds, data_sha256: str) -> None:
+    """Raise ResumeMismatch if a checkpoint in `out_dir` does not belong to `study` on `ds` (see the module)."""
+    groups = sweep_groups(study.variants) if study.vmap_sweeps else [((v,), None) for v in study.variants]
+    curves = out_dir / "curves.csv"
+    try:
+        rows = read_curves(curves) if curves.is_file() else []
+    except (OSError, ValueError, KeyError) as e:  # it is written again from the checkpoints' rows
+        print(f"warning: {curves} cannot be read ({type(e).__name__}); it is written again from the checkpoints",
+              file=sys.stderr)
+        rows = []
+    for group, _ in groups:
+        path, labels = checkpoint_path(out_dir, group), {v.label for v in group}
+        if not path.is_file():
+            done = [int(r["update"]) for r in rows if r.get("variant") in labels]
+            if done:
+                print(f"warning: {path} is missing although curves.csv has evaluations of {', '.join(sorted(labels))} "
+                      f"up to update {max(done)}; they start again from update 0", file=sys.stderr)
+            continue
+        try:
+            payload = serialization.msgpack_restore(path.read_bytes())
+            update, history = int(payload["update"]), json.loads(payload["history"])
+            states = payload["states"]
+        except Exception as e:  # noqa: BLE001 -- any unreadable checkpoint gets the same one line
+            raise ResumeMismatch(f"{path}: not a readable checkpoint ({type(e).__name__}); nothing was changed") \
+                from None
+        if "identity" in payload:
+            defaults = [json.loads(json.dumps(dataclasses.asdict(type(make_config(v.algo))()), default=list))
+                        for v in group]
+            differ = identity_differences(json.loads(payload["identity"]),
+                                          group_identity(study, group, data_sha256), defaults)
+            if differ:
+                raise ResumeMismatch(f"{path}: made by another run ({'; '.join(differ[:3])}"
+                                     f"{'; ...' if len(differ) > 3 else ''}); nothing was changed")
+        problem = shape_mismatch(state_shapes(study, group, ds.obs_dim, ds.act_dim, len(ds)), states)
+        if problem:
+            raise ResumeMismatch(f"{path}: does not fit the networks of {out_dir / 'config.json'} ({problem}); "
+                                 "nothing was changed")
+        strangers = sorted({str(r.get("variant")) for r in history} - labels)
+        if update > study.updates or strangers:
+            why = f"it is at update {update}, past the budget of {study.updates}" if update > study.updates else \
+                f"it holds rows of other variants ({', '.join(strangers[:3])})"
+            raise ResumeMismatch(f"{path}: does not belong to this run ({why}); nothing was changed")

@@ -1,0 +1,171 @@
+"""A resume continues the run its files belong to, or refuses with one line and changes nothing
+(`offrl_jax.resume`)."""
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from flax import serialization
+
+from offrl_jax.resume import ResumeMismatch, shape_mismatch
+from offrl_jax.runner import run_study
+from offrl_jax.study import Study, Variant
+
+from .conftest import synthetic_dataset
+
+
+def tiny_study(**changes) -> Study:
+    hidden = changes.pop("hidden", (32, 32))
+    study = Study(name="t", dataset="synthetic", env="hopper", seeds=(0, 1), updates=200, eval_every=100,
+                  eval_episodes=1, batch_size=32,
+                  variants=(Variant.of("scratch", "td3bc", pretrain="none", hidden=hidden),))
+    return dataclasses.replace(study, **changes)
+
+
+def digest(run: Path) -> dict[str, str]:
+    return {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(run.rglob("*")) if p.is_file()}
+
+
+@pytest.fixture(scope="module")
+def half_run(tmp_path_factory):
+    """A run stopped after its first chunk (its budget cut to 100 updates), to be resumed to 200."""
+    run = tmp_path_factory.mktemp("resume") / "half"
+    run_study(tiny_study(updates=100), run, synthetic_dataset(), progress=False)
+    return run
+
+
+def resumed_copy(half_run: Path, tmp_path: Path) -> Path:
+    run = tmp_path / "run"
+    shutil.copytree(half_run, run)
+    return run
+
+
+def test_an_edited_config_is_refused_naming_what_differs_and_nothing_changes(half_run, tmp_path):
+    run = resumed_copy(half_run, tmp_path)
+    before = digest(run)
+    with pytest.raises(ResumeMismatch, match=r"made by another run \(variants; scratch: hidden \[32, 32\] -> "
+                                             r"\[16, 16\]\); nothing was changed"):
+        run_study(tiny_study(hidden=(16, 16)), run, synthetic_dataset(), resume=True, progress=False)
+    assert digest(run) == before
+
+
+@pytest.mark.parametrize("change, named", [({"seeds": (0, 2)}, "seeds"), ({"batch_size": 16}, "batch size"),
+                                           ("data", "dataset")])
+def test_a_checkpoint_of_another_run_is_refused_and_nothing_changes(half_run, tmp_path, change, named):
+    run = resumed_copy(half_run, tmp_path)
+    before = digest(run)
+    study, data = tiny_study(), synthetic_dataset()
+    if change == "data":
+        data = synthetic_dataset(seed=1)
+    else:
+        study = dataclasses.replace(study, **change)
+    with pytest.raises(ResumeMismatch, match=f"made by another run \\({named}"):
+        run_study(study, run, data, resume=True, progress=False)
+    assert digest(run) == before
+
+
+def test_an_old_checkpoint_without_fingerprint_is_checked_by_its_shapes(half_run, tmp_path):
+    run = resumed_copy(half_run, tmp_path)
+    path = run / "checkpoints" / "scratch.msgpack"
+    payload = serialization.msgpack_restore(path.read_bytes())
+    payload.pop("identity")
+    path.write_bytes(serialization.msgpack_serialize(payload))
+    before = digest(run)
+    with pytest.raises(ResumeMismatch, match=r"does not fit the networks .*shape \(2, 32"):
+        run_study(tiny_study(hidden=(48, 48)), run, synthetic_dataset(), resume=True, progress=False)
+    assert digest(run) == before
+    run_study(tiny_study(), run, synthetic_dataset(), resume=True, progress=False)  # its own study: resumes
+
+
+def test_a_checkpoint_with_rows_of_other_variants_is_refused(half_run, tmp_path):
+    run = resumed_copy(half_run, tmp_path)
+    path = run / "checkpoints" / "scratch.msgpack"
+    payload = serialization.msgpack_restore(path.read_bytes())
+    payload["history"] = payload["history"].replace('"scratch"', '"someone-else"')
+    payload.pop("identity")
+    path.write_bytes(serialization.msgpack_serialize(payload))
+    with pytest.raises(ResumeMismatch, match="rows of other variants"):
+        run_study(tiny_study(), run, synthetic_dataset(), resume=True, progress=False)
+
+
+def test_an_unreadable_checkpoint_is_one_line(half_run, tmp_path):
+    run = resumed_copy(half_run, tmp_path)
+    (run / "checkpoints" / "scratch.msgpack").write_bytes(b"\x00not msgpack")
+    with pytest.raises(ResumeMismatch, match="not a readable checkpoint"):
+        run_study(tiny_study(), run, synthetic_dataset(), resume=True, progress=False)
+
+
+def without_seconds(curves: Path) -> list[list[str]]:
+    return [line.split(",")[:5] + line.split(",")[6:] for line in curves.read_text().splitlines()]
+
+
+@pytest.fixture(scope="module")
+def whole_run(tmp_path_factory):
+    run = tmp_path_factory.mktemp("resume") / "whole"
+    run_study(tiny_study(), run, synthetic_dataset(), progress=False)
+    return run
+
+
+def test_its_own_checkpoint_resumes_to_the_uninterrupted_run(half_run, whole_run, tmp_path):
+    run = resumed_copy(half_run, tmp_path)
+    run_study(tiny_study(), run, synthetic_dataset(), resume=True, progress=False)
+    assert without_seconds(run / "curves.csv") == without_seconds(whole_run / "curves.csv")
+
+
+def test_a_missing_checkpoint_is_reported_and_the_run_made_again(half_run, whole_run, tmp_path, capsys):
+    run = resumed_copy(half_run, tmp_path)
+    (run / "checkpoints" / "scratch.msgpack").unlink()
+    run_study(tiny_study(), run, synthetic_dataset(), resume=True, progress=False)
+    assert "scratch.msgpack is missing although curves.csv has evaluations of scratch up to update 100; they " \
+           "start again from update 0" in capsys.readouterr().err
+    assert without_seconds(run / "curves.csv") == without_seconds(whole_run / "curves.csv")
+
+
+def test_a_config_field_added_since_is_no_difference_at_its_default():
+    from offrl_jax.resume import identity_differences
+
+    saved = {"variants": [["v", "td3bc", []]], "resolved": [{"alpha": 2.5}], "seeds": [0], "batch_size": 256,
+             "env": "hopper", "data": "abc"}
+    now = dict(saved, resolved=[{"alpha": 2.5, "new_switch": False}])
+    assert identity_differences(saved, now, [{"alpha": 2.5, "new_switch": False}]) == []
+    changed = dict(saved, resolved=[{"alpha": 2.5, "new_switch": True}])
+    assert identity_differences(saved, changed, [{"alpha": 2.5, "new_switch": False}]) == \
+        ["v: new_switch '(absent)' -> True"]
+
+
+def test_a_multi_study_resume_checks_every_study_before_writing(tmp_path):
+    """--resume --updates N on a run of several studies: a foreign checkpoint in the second study is refused before
+    the first study (or the top-level config.json) is touched."""
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    out = tmp_path / "fig"
+    tiny = ["--envs", "hopper", "walker2d", "--algos", "td3bc", "--pretrain", "none", "--updates", "100",
+            "--eval-every", "100", "--seeds", "1", "--eval-episodes", "1", "--max-transitions", "2000",
+            "--batch-size", "32", "--hidden", "16", "16", "--parallel", "1", "--no-progress"]
+    done = subprocess.run([sys.executable, "-m", "experiments.figure2", *tiny, "--out", str(out)], cwd=root,
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    studies = sorted(p.parent for p in out.glob("*/config.json"))
+    foreign = next(p for p in studies[1].glob("checkpoints/*.msgpack") if ".best." not in p.name)
+    foreign.write_bytes((studies[0] / "checkpoints" / foreign.name).read_bytes())  # the other env's checkpoint
+    before = digest(out)
+    result = subprocess.run([sys.executable, "-m", "experiments.figure2", "--resume", str(out), "--updates", "200"],
+                            cwd=root, capture_output=True, text=True, timeout=600)
+    assert result.returncode == 2 and "made by another run" in result.stderr, result.stderr
+    assert "Traceback" not in result.stderr and digest(out) == before
+
+
+def test_shape_mismatch_names_the_first_difference():
+    expected = {"a": {"w": np.zeros((2, 3))}, "b": np.zeros(4)}
+    assert shape_mismatch(expected, {"a": {"w": np.ones((2, 3))}, "b": np.ones(4)}) is None
+    assert shape_mismatch(expected, {"a": {"w": np.ones((2, 5))}, "b": np.ones(4)}) == \
+        "/a/w: shape (2, 5), expected (2, 3)"
+    assert "expected entries ['b'] not found" in shape_mismatch(expected, {"a": {"w": np.ones((2, 3))}})
+    assert "unexpected entries ['c']" in shape_mismatch(expected, {"a": {"w": np.ones((2, 3))}, "b": np.ones(4),
+                                                                   "c": 1})
