@@ -11,6 +11,12 @@ seed-mean score at every evaluation (rows: variants, columns: updates) from the 
 process per variant on a GPU) into OUT, re-summarised across them (`offrl_jax.results.merge_runs`), and reports OUT:
 
     python -m experiments.report --merge runs/door-all runs/door-BC runs/door-CQL
+
+`--plot FIG.png` draws every study given as one panel of one figure (and FIG.pdf beside it), laid out as the
+paper's Figure 2 (rows: environments, columns: algorithms) when each (environment, algorithm) is one study, or all
+in one panel with `--overlay` (`offrl_jax.figures`):
+
+    python -m experiments.report results/figure2/*-td3bc results/figure2/*-edac --plot figure2.png
 """
 from __future__ import annotations
 
@@ -21,7 +27,8 @@ from collections import defaultdict
 from pathlib import Path
 
 from experiments.common import OneLineParser
-from offrl_jax.cli import check_writable_dir
+from offrl_jax.cli import check_writable_dir, check_writable_file
+from offrl_jax.figures import plot_studies
 from offrl_jax.results import merge_runs, read_curves, summary_table as table
 
 
@@ -67,8 +74,16 @@ def main(argv=None) -> int:
     p.add_argument("--curves", action="store_true", help="also the seed-mean score at every evaluation")
     p.add_argument("--merge", type=Path, metavar="OUT",
                    help="merge the run directories (one study, different variants) into OUT (a new directory)")
+    p.add_argument("--plot", type=Path, metavar="FIG.png", help="also draw every study as a panel of one figure")
+    p.add_argument("--overlay", action="store_true", help="with --plot: every study in one panel")
+    p.add_argument("--no-reference", action="store_true",
+                   help="with --plot: no behaviour-score line (drawing it loads each cached dataset once)")
     args = p.parse_args(argv)
     try:
+        if args.plot is not None:
+            if args.plot.suffix.lower() != ".png":
+                raise ValueError(f"--plot {args.plot}: the name must end in .png")
+            check_writable_file(args.plot)
         if args.merge:
             if args.merge.is_dir() and any(args.merge.iterdir()):
                 what = "already holds a run" if (args.merge / "config.json").exists() else "is not empty"
@@ -81,6 +96,12 @@ def main(argv=None) -> int:
                 print(f"### {path.parent}\n\n{table(read_summary(path))}\n")
                 if args.curves:
                     print(curve_table(path.parent / "curves.csv") + "\n")
+        if args.plot is not None:
+            study_dirs = [path.parent for d in args.dirs for path in summaries(d)]
+            for d in study_dirs:
+                read_summary(d / "summary.json")
+            written = plot_studies(study_dirs, args.plot, reference=not args.no_reference, overlay=args.overlay)
+            print(f"figure: {', '.join(map(str, written))}", file=sys.stderr)
     except (OSError, ValueError, KeyError, IndexError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

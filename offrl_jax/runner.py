@@ -10,10 +10,13 @@ Output directory:
                      evaluations (so a run stopped with SIGSTOP, or sharing its core, shows longer seconds)
     summary.json     one object per variant (see `summarize`)
     curves.png       mean and 95 % CI per variant against updates, pre-training end marked
-    checkpoints/     <variant>.msgpack, the last complete chunk of every variant
+    checkpoints/     <variant>.msgpack, the last complete chunk of every variant (of every sweep group:
+                     <label>+<label>...), and <variant>.best.msgpack, its seeds at its best seed-mean evaluation;
+                     with the observation statistics and the env, for `offrl_jax.policy.load_policy`
 """
 from __future__ import annotations
 
+import json
 import math
 import sys
 import threading
@@ -30,7 +33,10 @@ from offrl_jax.checkpoint import atomic_write_text, load_checkpoint, save_checkp
 from offrl_jax.data.dataset import Dataset
 from offrl_jax.driver import Driver, device_data
 from offrl_jax.evaluate import evaluate_normalized, make_policy
+from offrl_jax.loggers import make_logger
+from offrl_jax.provenance import fingerprint
 from offrl_jax.results import plot_curves, pretrain_ends_of, summarize, summary_json, write_curves
+from offrl_jax.resume import check_resume, checkpoint_path, group_identity
 from offrl_jax.study import Study, Variant, sweep_groups
 from offrl_jax.workers import run_in_processes
 
@@ -40,28 +46,33 @@ class Diverged(RuntimeError):
 
 
 def run_study(study: Study, out_dir: Path, dataset: Dataset, resume: bool = False, progress: bool = True,
-              parallel: int = 1, processes: bool | None = None) -> list[dict]:
+              parallel: int = 1, processes: bool | None = None, logger: str | None = None) -> list[dict]:
     """Run (or resume) every variant; write results as it goes; return the summary.
 
     Variants that differ only in one sweepable hyper-parameter (`sweep_groups`) train as one vmapped program unless
     `study.vmap_sweeps` is off.  `parallel` > 1 runs that many variants (or groups) at once: at these network sizes
     one XLA program keeps about one CPU core busy.  On the CPU they run in worker processes pinned to their own
-    cores (`offrl_jax.workers`, 20 % faster than threads on 2 cores); elsewhere (one GPU), or with
+    cores (`offrl_jax.workers`, 10-20 % faster than threads on 2 cores); elsewhere (one GPU), or with
     `processes=False`, in threads of this process (a jitted chunk releases the GIL).  Results do not depend on
-    either (each variant's randomness is its own).
+    either (each variant's randomness is its own).  `logger` ("tensorboard" or "wandb") also sends every
+    evaluation's scores and metrics there (`offrl_jax.loggers`); curves.csv stays the record.
     """
+    data_sha256 = fingerprint(dataset)
+    if resume:  # before anything is written: the checkpoints must belong to this study and this data
+        check_resume(study, out_dir, dataset, data_sha256)
     out_dir.mkdir(parents=True, exist_ok=True)
     config_path = out_dir / "config.json"  # a resumed multi-study run may not have begun this study yet
     previous = config_path.read_text() if resume and config_path.exists() else None
     atomic_write_text(config_path, study.record_json(dataset, previous))
-    bar = tqdm(total=len(study.variants) * study.updates, disable=not progress, unit="upd", dynamic_ncols=True,
-               file=sys.stderr)
-    recorder = _Recorder(out_dir / "curves.csv", [v.label for v in study.variants])
+    if logger is not None:
+        logger = make_logger(logger, out_dir, study, resume)
+    bar = _Progress(len(study.variants) * study.updates, progress)
+    recorder = _Recorder(out_dir / "curves.csv", [v.label for v in study.variants], logger)
     pretrain_ends: dict[str, int] = {}
     groups = sweep_groups(study.variants) if study.vmap_sweeps else [((v,), None) for v in study.variants]
 
     def run(group: tuple[tuple[Variant, ...], str | None]) -> None:
-        end = _run_group(study, *group, dataset, out_dir, resume, bar, recorder)
+        end = _run_group(study, *group, dataset, data_sha256, out_dir, resume, bar, recorder)
         pretrain_ends.update({v.label: end for v in group[0]})
 
     try:
@@ -69,7 +80,7 @@ def run_study(study: Study, out_dir: Path, dataset: Dataset, resume: bool = Fals
             for group in groups:
                 run(group)
         elif processes if processes is not None else jax.default_backend() == "cpu":
-            tasks = [(study, *group, dataset, out_dir, resume) for group in groups]
+            tasks = [(study, *group, dataset, data_sha256, out_dir, resume) for group in groups]
             run_in_processes(_run_group, tasks, parallel, bar, recorder,
                              lambda i, end: pretrain_ends.update({v.label: end for v in groups[i][0]}))
         else:
@@ -84,6 +95,11 @@ def run_study(study: Study, out_dir: Path, dataset: Dataset, resume: bool = Fals
                     raise
     finally:
         bar.close()
+        if recorder.logger is not None:
+            try:
+                recorder.logger.close()
+            except Exception as e:  # noqa: BLE001 -- never in the way of the run's own outcome
+                print(f"warning: closing the logger failed ({type(e).__name__}: {e})", file=sys.stderr)
     history = recorder.all_rows()
     summary = summarize(study, history, pretrain_ends)
     atomic_write_text(out_dir / "summary.json", summary_json(summary))
@@ -95,24 +111,57 @@ class Stopped(RuntimeError):
     """Another variant failed or the run was interrupted; this one stopped at a chunk boundary."""
 
 
-class _Recorder:
-    """Rows of every variant (in study order), written to curves.csv after each evaluation; thread-safe."""
+class _Progress:
+    """The progress bar, or with `progress` off one plain line per evaluation (so a batch log shows the run as it
+    goes); `update`, `set_postfix_str`, `write` and `close` as tqdm's."""
 
-    def __init__(self, path: Path, labels: list[str]):
-        self.path, self.rows = path, {label: [] for label in labels}
+    def __init__(self, total: int, progress: bool):
+        self.bar = tqdm(total=total, disable=not progress, unit="upd", dynamic_ncols=True, file=sys.stderr)
+        self.plain, self.total, self.done, self.tic = not progress, total, 0, time.monotonic()
+
+    def update(self, n: int) -> None:
+        self.bar.update(n)
+        self.done += n
+
+    def set_postfix_str(self, text: str) -> None:
+        if not self.plain:
+            return self.bar.set_postfix_str(text)
+        minutes, seconds = divmod(int(time.monotonic() - self.tic), 60)
+        print(f"[{100 * self.done / self.total:3.0f}% {minutes:3d}:{seconds:02d}] {text}", file=sys.stderr, flush=True)
+
+    def write(self, text: str, file=None) -> None:
+        self.bar.write(text, file=sys.stderr)
+
+    def close(self) -> None:
+        self.bar.close()
+
+
+class _Recorder:
+    """Rows of every variant (in study order), written to curves.csv after each evaluation (and handed to the
+    `logger`, if any); thread-safe."""
+
+    def __init__(self, path: Path, labels: list[str], logger=None):
+        self.path, self.rows, self.logger = path, {label: [] for label in labels}, logger
         self.lock, self.stop = threading.Lock(), threading.Event()
 
     def set(self, rows_by_label: dict[str, list[dict]]) -> None:
         with self.lock:
             self.rows.update({label: list(rows) for label, rows in rows_by_label.items()})
             write_curves(self.path, self.all_rows())
+            if self.logger is not None:
+                try:
+                    self.logger.log([row for rows in rows_by_label.values() for row in rows])
+                except Exception as e:  # noqa: BLE001 -- the logger is a copy; training and curves.csv go on
+                    print(f"warning: the logger failed ({type(e).__name__}: {e}); it is off for the rest of the run",
+                          file=sys.stderr)
+                    self.logger = None
 
     def all_rows(self) -> list[dict]:
         return [row for rows in self.rows.values() for row in rows]
 
 
-def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: Dataset, out_dir: Path, resume: bool,
-               bar, recorder: _Recorder) -> int:
+def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: Dataset, data_sha256: str,
+               out_dir: Path, resume: bool, bar, recorder: _Recorder) -> int:
     """Train one variant (S vmapped seeds), or a sweep group (values x seeds in one vmapped program), evaluating
     between chunks; returns the number of pre-training updates."""
     first_variant, labels, seeds = group[0], [v.label for v in group], study.seeds
@@ -126,7 +175,10 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
     pretrain_end = sum(p.steps for p in phases if p.name != "offline_rl")
     last_update = sum(p.steps for p in phases)  # TD3 trims an odd budget to its 2-update call grid
     name = " + ".join(labels)
-    ckpt_path = out_dir / "checkpoints" / f"{'+'.join(labels)}.msgpack"
+    ckpt_path = checkpoint_path(out_dir, group)
+    meta = {"identity": json.dumps(group_identity(study, group, data_sha256)), "env": study.env,
+            "members": [[v.label, seed] for v in group for seed in seeds],
+            "obs_mean": np.asarray(obs_mean, np.float32), "obs_std": np.asarray(obs_std, np.float32)}
     states, start, seconds, rows = None, 0, 0.0, []
 
     def record():
@@ -146,6 +198,7 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
     last_saved = start
     last_score = {(r["variant"], r["seed"]): r["score"] for r in rows}  # resumed: a seed that had diverged stays out
     alive = np.array([math.isfinite(last_score.get((v.label, seed), 0.0)) for v, seed in member_names])
+    best = _best_scores(rows)  # resumed: the best checkpoints already written
     for chunk in driver.run(phases, study.eval_every, states, start, seconds, ended, last_metrics):
         if recorder.stop.is_set():
             raise Stopped(f"{name} stopped at update {start}; last checkpoint: update {last_saved}")
@@ -177,12 +230,32 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
                             f"{mean_score:.1f} | eval {time.perf_counter() - tic:.1f}s")
         # checkpoints go on after a partial divergence: on resume the diverged seeds' NaN scores keep them out
         if chunk.update - last_saved >= every or chunk.update == last_update:
-            save_checkpoint(ckpt_path, chunk.states, chunk.update, chunk.seconds, rows)
+            save_checkpoint(ckpt_path, chunk.states, chunk.update, chunk.seconds, rows, meta)
             last_saved = chunk.update
+        for j, variant in enumerate(group):  # each variant's best evaluation so far (its seed mean) is kept too
+            mine = slice(j * len(seeds), (j + 1) * len(seeds))
+            if alive[mine].any() and np.nanmean(scores[mine]) > best.get(variant.label, -math.inf):
+                best[variant.label] = float(np.nanmean(scores[mine]))
+                save_checkpoint(checkpoint_path(out_dir, (variant,), "best"),
+                                jax.tree.map(lambda x, m=mine: x[m], chunk.states), chunk.update, chunk.seconds,
+                                [r for r in rows if r["variant"] == variant.label],
+                                meta | {"members": meta["members"][mine], "best_score": best[variant.label]})
         record()
     if any(p.auto_stop for p in phases):  # where pre-training actually ended
         return max(pretrain_ends_of(rows).values(), default=pretrain_end)
     return pretrain_end
+
+
+def _best_scores(rows: list[dict]) -> dict[str, float]:
+    """Per variant, the best seed-mean score of its evaluations so far."""
+    by_eval: dict[tuple[str, int], list[float]] = {}
+    for r in rows:
+        if math.isfinite(r["score"]):
+            by_eval.setdefault((r["variant"], r["update"]), []).append(r["score"])
+    best: dict[str, float] = {}
+    for (label, _), scores in by_eval.items():
+        best[label] = max(best.get(label, -math.inf), sum(scores) / len(scores))
+    return best
 
 
 def _metrics_at(rows: list[dict], members: list[tuple[Variant, int]], update: int) -> dict[str, np.ndarray] | None:

@@ -1,0 +1,114 @@
+"""Figures across runs: one panel per study, laid out as the paper's (rows: environments, columns: algorithms).
+
+Each panel draws every variant's seed-mean score against updates with its 95 % t-interval clipped to the range the
+seeds span (with 2 seeds the bare t-interval is ±12.7 standard errors, far outside anything observed), a dotted line
+where pre-training ended, and a dashed line at the behaviour data's score (the mean D4RL-normalised return of the
+dataset's episodes) when that dataset is in the cache.  `overlay=True` draws every study in one panel instead.
+Updates are ticked as 20k / 1M; the figure is written as PNG and PDF.
+"""
+from __future__ import annotations
+
+import functools
+import io
+import json
+from pathlib import Path
+
+import numpy as np
+
+from offrl_jax.checkpoint import atomic_write_bytes
+from offrl_jax.results import ci95, read_curves, score_matrix
+
+ALGO_NAMES = {"td3bc": "TD3+BC", "edac": "EDAC", "td3bc_cql": "TD3+BC+CQL", "edac_bc": "EDAC+BC", "bc": "BC",
+              "cql": "CQL", "sacn": "SAC-N"}
+
+
+@functools.cache
+def behaviour_score(dataset: str) -> float | None:
+    """The dataset's behaviour score, if the dataset is cached (None otherwise: nothing is generated here)."""
+    from offrl_jax import datasets
+    from offrl_jax.envs import normalized_score
+
+    try:
+        if not datasets.is_cached(dataset):
+            return None
+        ds = datasets.load(dataset)
+    except Exception:  # noqa: BLE001 -- a reference line is optional; a dataset we cannot read simply has none
+        return None
+    return float(np.mean(normalized_score(ds.env, ds.episode_returns())))
+
+
+def panel_grid(summaries: list[list[dict]]) -> tuple[list[str], list[str]]:
+    """(row names, column names): envs x algorithms when every (env, algorithm) is one study, else one row."""
+    keys = [(s[0]["env"], s[0]["algo"]) for s in summaries]
+    if len(set(keys)) == len(keys):
+        return list(dict.fromkeys(k[0] for k in keys)), list(dict.fromkeys(k[1] for k in keys))
+    return [""], [str(i) for i in range(len(summaries))]
+
+
+def updates_label(x: float, _=None) -> str:
+    """20000 -> 20k, 1000000 -> 1M, 2500 -> 2.5k."""
+    if abs(x) >= 1e6:
+        return f"{x / 1e6:g}M"
+    return f"{x / 1e3:g}k" if abs(x) >= 1e3 else f"{x:g}"
+
+
+def plot_studies(study_dirs: list[Path], path: Path, reference: bool = True, overlay: bool = False) -> list[Path]:
+    """One panel per study directory (its summary.json and curves.csv), or all in one (`overlay`), written to
+    `path` as PNG and beside it as PDF; returns the files written."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter
+
+    summaries = [json.loads((d / "summary.json").read_text()) for d in study_dirs]
+    rows, cols = ([""], ["0"]) if overlay else panel_grid(summaries)
+    fig, axes = plt.subplots(len(rows), len(cols), figsize=(4.2 * len(cols), 3.2 * len(rows)), squeeze=False)
+    used = set()
+    for index, (study_dir, summary) in enumerate(zip(study_dirs, summaries)):
+        env, algo = summary[0]["env"], summary[0]["algo"]
+        r, c = (0, 0) if overlay else (rows.index(env), cols.index(algo)) if rows != [""] else (0, index)
+        ax = axes[r][c]
+        used.add((r, c))
+        curves = read_curves(study_dir / "curves.csv")
+        for i, entry in enumerate(summary):
+            updates, _, scores = score_matrix(curves, entry["variant"])
+            if not len(updates):
+                continue
+            color = f"C{len(ax.get_lines()) if overlay else i}"
+            mean = np.nanmean(scores, axis=0)
+            half = np.array([ci95(scores[:, j]) for j in range(len(updates))])
+            low = np.maximum(mean - half, np.nanmin(scores, axis=0))
+            high = np.minimum(mean + half, np.nanmax(scores, axis=0))
+            label = f"{study_dir.name}: {entry['variant']}" if overlay else entry["variant"]
+            ax.plot(updates, mean, color=color, label=label)
+            ax.fill_between(updates, low, high, color=color, alpha=0.2)
+            if entry.get("pretrain_updates"):
+                ax.axvline(entry["pretrain_updates"], color=color, ls=":", lw=1)
+        behaviour = behaviour_score(summary[0]["dataset"]) if reference else None
+        if behaviour is not None:
+            ax.axhline(behaviour, color="grey", ls="--", lw=1, label=f"behaviour data ({behaviour:.1f})")
+        if not overlay:
+            ax.set_title(f"{summary[0]['dataset']}, {ALGO_NAMES.get(algo, algo)} ({len(summary[0]['seeds'])} "
+                         "seeds)", fontsize=10)
+        ax.xaxis.set_major_formatter(FuncFormatter(updates_label))
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+        if r == len(rows) - 1:
+            ax.set_xlabel("updates (dotted: end of pre-training)")
+        if c == 0:
+            ax.set_ylabel("normalised score")
+    for r in range(len(rows)):
+        for c in range(len(cols)):
+            if (r, c) not in used:
+                axes[r][c].axis("off")
+    fig.suptitle("seed mean; band: 95 % t-interval, clipped to the range of the seeds", fontsize=9)
+    fig.tight_layout()
+    written = []
+    for target, kind in ((path, "png"), (path.with_suffix(".pdf"), "pdf")):
+        buffer = io.BytesIO()
+        fig.savefig(buffer, format=kind, dpi=110)
+        atomic_write_bytes(target, buffer.getvalue())
+        written.append(target)
+    plt.close(fig)
+    return written

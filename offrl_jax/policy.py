@@ -1,0 +1,122 @@
+"""Use what was trained: a run's policy in three lines, and an export that needs no training code.
+
+    from offrl_jax.policy import load_policy
+    policy = load_policy("runs/mujoco_medium/20261202-080000", variant="pretrained", seed=0)
+    action = policy(obs)                         # (obs_dim,) or (B, obs_dim) raw observations -> actions in [-1, 1]
+
+The policy is the deterministic one the evaluations score (TD3+BC's actor; tanh of the EDAC/CQL actor's mean), on
+observations normalised with the training data's statistics, which the checkpoint stores.  It acts from the
+variant's last checkpoint (the state after its last complete chunk of updates; `policy.update`), or from the one
+taken at its best seed-mean evaluation (`checkpoint="best"`).
+
+`policy.export(path)` writes the whole policy (normalisation included) as a serialized `jax.export` function with a
+symbolic batch size; `load_exported(path)` reads it back with nothing but JAX.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from flax import serialization
+
+from offrl_jax.algos import make_algorithm, make_config
+from offrl_jax.envs import get_env_spec
+from offrl_jax.resume import checkpoint_path
+from offrl_jax.study import Study, sweep_groups
+
+
+@dataclasses.dataclass
+class Policy:
+    act: Callable[[jax.Array], jax.Array]  # jitted: raw observations (B, obs_dim) -> actions (B, act_dim)
+    env: str
+    variant: str
+    seed: int
+    update: int  # the updates its checkpoint had done (pre-training included)
+    config: Any  # the variant's resolved algorithm config
+    obs_dim: int
+    act_dim: int
+
+    def __call__(self, obs) -> np.ndarray:
+        obs = np.asarray(obs, np.float32)
+        if obs.ndim == 1:
+            return np.asarray(self.act(obs[None]))[0]
+        return np.asarray(self.act(obs))
+
+    def export(self, path: str | Path, platforms: tuple[str, ...] | None = None) -> Path:
+        """Write the policy as a serialized `jax.export` function: float32 (b, obs_dim) -> (b, act_dim), for the
+        platform it is exported on unless `platforms` names others (e.g. ("cpu", "cuda"))."""
+        from jax import export
+
+        (batch,) = export.symbolic_shape("b")
+        exported = export.export(jax.jit(self.act), platforms=platforms)(
+            jax.ShapeDtypeStruct((batch, self.obs_dim), jnp.float32))
+        path = Path(path)
+        path.write_bytes(exported.serialize())
+        return path
+
+
+def load_exported(path: str | Path) -> Callable[[np.ndarray], np.ndarray]:
+    """An exported policy as `act(obs (B, obs_dim)) -> actions (B, act_dim)`; needs only JAX."""
+    from jax import export
+
+    exported = export.deserialize(bytearray(Path(path).read_bytes()))
+    return lambda obs: np.asarray(exported.call(jnp.asarray(obs, jnp.float32)))
+
+
+def load_policy(run_dir: str | Path, variant: str | None = None, seed: int | None = None,
+                checkpoint: str = "last") -> Policy:
+    """The deterministic policy of `variant` (default: the run's first) and `seed` (default: its first) from the
+    run saved in `run_dir`: its last checkpoint, or with checkpoint="best" the one taken at the variant's best
+    seed-mean evaluation.  Raises ValueError (one line) for a run, variant or seed that is not there."""
+    if checkpoint not in ("last", "best"):
+        raise ValueError(f"checkpoint must be 'last' or 'best', not {checkpoint!r}")
+    run_dir = Path(run_dir)
+    try:
+        raw = json.loads((run_dir / "config.json").read_text())
+        study = Study.from_json(json.dumps(raw))
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        hint = ""
+        studies = [p.parent.name for p in sorted(run_dir.glob("*/config.json"))]
+        if studies:
+            hint = f"; it holds several studies: pass one of them ({', '.join(studies)})"
+        raise ValueError(f"{run_dir}: not a saved run ({type(e).__name__}: {e}){hint}") from None
+    labels = [v.label for v in study.variants]
+    variant = labels[0] if variant is None else variant
+    if variant not in labels:
+        raise ValueError(f"{run_dir}: no variant '{variant}'; the run has {', '.join(labels)}")
+    seed = study.seeds[0] if seed is None else seed
+    if seed not in study.seeds:
+        raise ValueError(f"{run_dir}: no seed {seed}; the run has seeds {', '.join(map(str, study.seeds))}")
+    groups = sweep_groups(study.variants) if study.vmap_sweeps else [((v,), None) for v in study.variants]
+    group = next(g for g, _ in groups if variant in [v.label for v in g])
+    path = checkpoint_path(run_dir, group if checkpoint == "last" else tuple(v for v in group if v.label == variant),
+                           checkpoint)
+    if not path.is_file():
+        raise ValueError(f"{path}: no checkpoint of '{variant}' (the run had not reached its first checkpoint, or "
+                         "its checkpoints were not kept)")
+    payload = serialization.msgpack_restore(path.read_bytes())
+    if "obs_mean" not in payload:
+        raise ValueError(f"{path}: made before checkpoints stored the observation statistics; train it again "
+                         f"(--config {run_dir / 'config.json'}) to act from it")
+    members = [[str(label), int(s)] for label, s in payload.get("members", [])]
+    member = members.index([variant, seed])
+    spec = get_env_spec(payload.get("env", study.env))
+    v = next(v for v in group if v.label == variant)
+    resolved = raw.get("resolved", {}).get(variant)  # the run's own values, whatever the current defaults are
+    config = make_config(v.algo, study.env, study.dataset, **(
+        {k: tuple(x) if isinstance(x, list) else x for k, x in resolved.items()} if resolved else dict(v.overrides)))
+    states = jax.tree.map(lambda x: np.asarray(x)[member], payload["states"])
+    rows = int(np.shape(states["soft_returns"])[0]) if "soft_returns" in states else 1
+    algo = make_algorithm(config, spec.obs_dim, spec.act_dim, rows)
+    state = serialization.from_state_dict(jax.eval_shape(algo.init, jax.random.PRNGKey(0)), states)
+    state = jax.tree.map(jnp.asarray, state)
+    mean, std = jnp.asarray(payload["obs_mean"]), jnp.asarray(payload["obs_std"])
+    act = jax.jit(lambda obs: algo.act(state, (obs - mean) / std))
+    return Policy(act, spec.name, variant, seed, int(payload["update"]), config, spec.obs_dim, spec.act_dim)
+

@@ -1,0 +1,53 @@
+"""`experiments.report --plot`: the committed Figure 2 runs as one grid (rows: envs, columns: algorithms)."""
+from __future__ import annotations
+
+import struct
+from pathlib import Path
+
+from offrl_jax.figures import panel_grid
+
+ROOT = Path(__file__).resolve().parents[1]
+RUNS = [ROOT / "results" / "figure2" / name for name in ("halfcheetah-td3bc", "walker2d-td3bc", "hopper-edac")]
+
+
+def png_size(path: Path) -> tuple[int, int]:
+    data = path.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    return struct.unpack(">II", data[16:24])
+
+
+def test_the_committed_figure2_runs_make_one_envs_by_algorithms_grid(tmp_path):
+    from experiments import report
+
+    figure = tmp_path / "figure2.png"
+    assert report.main([*map(str, RUNS), "--plot", str(figure), "--no-reference"]) == 0
+    width, height = png_size(figure)
+    assert (width, height) == (int(4.2 * 2 * 110), int(3.2 * 3 * 110))  # 3 envs x 2 algorithms
+    assert figure.with_suffix(".pdf").read_bytes()[:4] == b"%PDF"
+
+
+def test_overlay_draws_every_study_in_one_panel(tmp_path):
+    from experiments import report
+
+    figure = tmp_path / "overlay.png"
+    assert report.main([*map(str, RUNS[:2]), "--plot", str(figure), "--overlay", "--no-reference"]) == 0
+    assert png_size(figure) == (int(4.2 * 110), int(3.2 * 110))
+
+
+def test_update_ticks_read_as_20k_and_1m():
+    from offrl_jax.figures import updates_label
+
+    assert [updates_label(x) for x in (0, 2500, 20_000, 1_000_000, 1_500_000)] == ["0", "2.5k", "20k", "1M", "1.5M"]
+
+
+def test_studies_that_share_an_env_and_algorithm_go_in_one_row():
+    one = [{"env": "hopper", "algo": "td3bc"}]
+    assert panel_grid([one, one]) == ([""], ["0", "1"])
+    assert panel_grid([one, [{"env": "door", "algo": "edac"}]]) == (["hopper", "door"], ["td3bc", "edac"])
+
+
+def test_plot_refuses_a_name_that_is_not_a_png(tmp_path, capsys):
+    from experiments import report
+
+    assert report.main([str(RUNS[0]), "--plot", str(tmp_path / "x.jpg")]) == 2
+    assert "must end in .png" in capsys.readouterr().err
