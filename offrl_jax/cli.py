@@ -30,9 +30,9 @@ def positive_int(text: str) -> int:
         if value != number:
             raise ValueError
     except (ValueError, OverflowError):
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got '{text}'") from None
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
     if value <= 0:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got '{text}'")
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
     return value
 
 
@@ -41,9 +41,9 @@ def int_at_least(low: int) -> Callable[[str], int]:
         try:
             value = int(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"expected an integer >= {low}, got '{text}'") from None
+            raise argparse.ArgumentTypeError(f"expected an integer >= {low}, got {text!r}") from None
         if value < low:
-            raise argparse.ArgumentTypeError(f"expected an integer >= {low}, got '{text}'")
+            raise argparse.ArgumentTypeError(f"expected an integer >= {low}, got {text!r}")
         return value
     return convert
 
@@ -61,10 +61,10 @@ def number(low: float = -math.inf, high: float = math.inf, low_open: bool = Fals
         try:
             value = float(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a number{where}, got '{text}'") from None
+            raise argparse.ArgumentTypeError(f"expected a number{where}, got {text!r}") from None
         inside = (value > low if low_open else value >= low) and (value < high if high_open else value <= high)
         if not math.isfinite(value) or not inside:
-            raise argparse.ArgumentTypeError(f"expected a finite number{where}, got '{text}'")
+            raise argparse.ArgumentTypeError(f"expected a finite number{where}, got {text!r}")
         return value
     return convert
 

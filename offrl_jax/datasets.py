@@ -6,8 +6,9 @@
     python -m offrl_jax.datasets generate hopper-medium --transitions 100000
 
 Generated names ("hopper-medium", ...) live as Minari-format directories in `cache_dir()/"datasets"/<name>` and are
-generated on first use; "door-human" is the human demonstrations in the shared data folder
-(`$OFFRL_JAX_SHARED`, else `<repo>/../shared`).  Errors exit with status 2 and one line "error: ..." on stderr.
+generated on first use; "door-human" is the 25 human demonstrations shipped with the package (DAPG, Apache-2.0;
+`offrl_jax/data/adroit/README.md`), or the copy in `$OFFRL_JAX_SHARED` when that is set.  Errors exit with status 2
+and one line "error: ..." on stderr.
 """
 from __future__ import annotations
 
@@ -36,7 +37,7 @@ _LOCOMOTION_KINDS = {
 KNOWN: dict[str, str] = {
     **{f"{env}-{kind}": f"generated: {env}, {text}" for env in ("hopper", "halfcheetah", "walker2d")
        for kind, text in _LOCOMOTION_KINDS.items()},
-    "door-human": "shared: 25 human demonstrations of Adroit door (6,729 transitions)",
+    "door-human": "shipped: 25 human demonstrations of Adroit door (6,729 transitions; DAPG, Apache-2.0)",
     "door-cloned": "generated: Adroit door, a behaviour-cloned policy mixed with the human demonstrations",
 }
 SHARED_NAMES = {"door-human": Path("data/adroit/door-human-demos.npz")}
@@ -52,8 +53,15 @@ def shared_dir() -> Path:
     return beside_repo if beside_repo.is_dir() or not beside_cwd.is_dir() else beside_cwd
 
 
+PACKAGED = Path(__file__).resolve().parent / "data" / "adroit" / "door-human-demos.npz"
+
+
 def door_human_path() -> Path:
-    return shared_dir() / SHARED_NAMES["door-human"]
+    """The door-human demonstrations: `$OFFRL_JAX_SHARED`'s copy when that is set, else the package's own
+    (`offrl_jax/data/adroit/`, DAPG, Apache-2.0; README there)."""
+    if os.environ.get("OFFRL_JAX_SHARED"):
+        return shared_dir() / SHARED_NAMES["door-human"]
+    return PACKAGED
 
 
 def cached_path(name: str) -> Path:
@@ -187,10 +195,11 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _list() -> None:
+    print(f"cache: {cached_path('x').parent}  ($OFFRL_JAX_CACHE or $XDG_CACHE_HOME move it)")
     for name, text in KNOWN.items():
         if name in SHARED_NAMES:
             where = door_human_path()
-            state = f"shared  {where}" if where.is_file() else f"missing {where}"
+            state = f"shipped {where}" if where.is_file() else f"missing {where}"
         else:
             state = f"cached  {cached_path(name)}" if is_cached(name) else "not cached"
         print(f"{name:26s} {state:60s} {text}")

@@ -92,6 +92,9 @@ def _one_line_error(module: str, *args: str, cwd=None):
     ("benchmarks.throughput", ["--target-s", "nan"], "finite number > 0"),
     ("benchmarks.throughput", ["--reps", "0"], "positive integer"),
     ("experiments.mujoco_medium", ["--alpha", "inf"], "finite number"),
+    ("experiments.mujoco_medium", ["--algo", "bc"], "has no effect on the BC baseline"),
+    ("benchmarks.parallel", ["--seeds", "0"], "positive integer"),
+    ("benchmarks.parallel", ["--cases", "gpu"], "invalid choice"),
     # a missing file
     ("benchmarks.throughput", ["--markdown", "/nonexistent.jsonl"], "/nonexistent.jsonl"),
     ("experiments.report", ["/nonexistent/run"], "/nonexistent/run"),

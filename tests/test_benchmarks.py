@@ -89,3 +89,17 @@ def test_handwritten_runs_unrolled_seeds():
     from benchmarks.handwritten import run
 
     assert run(seeds=2, mode="unrolled", calls=2, reps=1) > 0
+
+
+def test_device_check_runs_on_a_cpu_with_a_tiny_budget(tmp_path):
+    """The GPU check script itself, at a tiny budget: every section of its one results file is there."""
+    from benchmarks import device_check
+
+    out = tmp_path / "device.json"
+    report = device_check.main(["--quick", "--out", str(out)])
+    assert json.loads(out.read_text()) == report
+    assert set(report["matmul_tflops"]) == {"highest", "default"} and report["matmul_tflops"]["highest"] > 0
+    cases = {(c["algo"], c["seeds"]) for c in report["cases"]}
+    assert cases == {("td3bc", 1), ("td3bc", 2), ("edac", 1), ("edac", 2)}
+    for c in report["cases"]:
+        assert c["updates_per_s"] > 0 and c["finite"] and "pct_of_fp32_matmul" in c and "peak_memory_bytes" in c

@@ -181,3 +181,33 @@ def test_cli_clip_actions_flag(tmp_path):
 
 def test_cli_usage_error():
     assert_cli_error(run_cli("bogus"), "invalid choice")
+
+
+def test_door_human_ships_with_the_package_and_needs_no_shared_folder(tmp_path):
+    """From a directory with no ../shared and no $OFFRL_JAX_SHARED: the packaged copy (DAPG, Apache-2.0)."""
+    env = {k: v for k, v in os.environ.items() if k != "OFFRL_JAX_SHARED"}
+    result = subprocess.run([sys.executable, "-m", "offrl_jax.datasets", "info", "door-human"], cwd=tmp_path,
+                            env=env | {"PYTHONPATH": str(REPO)}, capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    info = json.loads(result.stdout)
+    assert info["transitions"] == 6729 and info["episodes"] == 25
+    assert datasets.PACKAGED.is_file() and (datasets.PACKAGED.parent / "README.md").is_file()
+
+
+def test_an_npz_with_d4rl_keys_reads_as_a_d4rl_file(tmp_path):
+    rng = np.random.default_rng(0)
+    T = 30
+    terminals = np.zeros(T)
+    terminals[9] = 1
+    path = tmp_path / "mine.npz"
+    np.savez(path, observations=rng.normal(size=(T, 11)), actions=rng.uniform(-1, 1, (T, 3)),
+             rewards=rng.normal(size=T), terminals=terminals)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # no timeouts key: inferred, with a warning
+        ds = datasets.load(path)
+    assert ds.env == "hopper" and len(ds) == T and ds.terminals.sum() == 1
+
+
+def test_list_shows_the_cache_root(tmp_path):
+    result = run_cli("list", env={"OFFRL_JAX_CACHE": str(tmp_path)})
+    assert result.returncode == 0 and result.stdout.splitlines()[0].startswith(f"cache: {tmp_path}")

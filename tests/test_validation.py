@@ -19,6 +19,9 @@ from offrl_jax.study import Study, Variant
     ("td3bc", {"pretrain": "both"}, "pretrain = 'both' must be one of"),
     ("td3bc", {"no_such_field": 1}, "'no_such_field' is not a hyper-parameter of td3bc"),
     ("dqn", {}, "unknown algorithm 'dqn'; valid: bc, td3bc"),
+    ("bc", {"pretrain": "none"}, "pretrain = 'none' has no effect on the BC baseline"),
+    ("bc", {"pretrain": "actor+critic"}, "pretrain = 'actor+critic' has no effect on the BC baseline"),
+    ("bc", {"pretrain_auto": True}, "pretrain_auto = True has no effect on the BC baseline"),
 ])
 def test_config_rejects(algo, overrides, message):
     with pytest.raises(ValueError) as err:

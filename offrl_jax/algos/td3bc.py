@@ -100,6 +100,10 @@ class TD3BCConfig:
             raise ValueError(f"TD3BCConfig.q_scale_eps = {self.q_scale_eps} must be >= 0")
         if self.target not in ("td", "max_mc"):
             raise ValueError(f"TD3BCConfig.target = {self.target!r} must be 'td' or 'max_mc'")
+        if self.bc_only and (self.pretrain != "actor" or self.pretrain_auto):
+            what = f"pretrain = {self.pretrain!r}" if self.pretrain != "actor" else "pretrain_auto = True"
+            raise ValueError(f"TD3BCConfig.{what} has no effect on the BC baseline (bc_only: every update is a BC "
+                             "update); it takes pretrain = 'actor' only")
 
 
 @struct.dataclass

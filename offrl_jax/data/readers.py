@@ -151,7 +151,11 @@ def read_d4rl_hdf5(path, env: str | None = None, clip_actions: bool = False) -> 
     an episode end).  `env` None: inferred from the file name and dims when unambiguous."""
     path = Path(path)
     _require_file(path)
-    data = _read_h5_arrays(path)
+    return d4rl_arrays_to_dataset(path, _read_h5_arrays(path), env, clip_actions)
+
+
+def d4rl_arrays_to_dataset(path: Path, data: dict, env: str | None = None, clip_actions: bool = False) -> Dataset:
+    """D4RL's keys (from an HDF5 file or an .npz) as a validated `Dataset`; see `read_d4rl_hdf5`."""
     for key in D4RL_REQUIRED:
         if key not in data:
             raise DatasetError(f"{path}: missing key '{key}' (found: {', '.join(sorted(data)) or 'none'})")
@@ -295,10 +299,19 @@ def read_minari(path_or_id, env: str | None = None, clip_actions: bool = False) 
 
 
 # ------------------------------------------------------------------------------------------------- Adroit npz
+def door_dims(data: dict) -> bool:
+    """Whether the arrays have Adroit door's observation and action sizes."""
+    spec = ENVS["door"]
+    return (np.ndim(data["observations"]) == 2 and np.shape(data["observations"])[1] == spec.obs_dim
+            and np.ndim(data["actions"]) == 2 and np.shape(data["actions"])[1] == spec.act_dim)
+
+
 def read_door_npz(path, env: str = "door", clip_actions: bool = True) -> Dataset:
     """Adroit demonstrations as .npz: observations (T, o), actions (T, a), rewards (T,), episode_lengths (E,) with
-    sum T.  The last step of each trajectory is a time-out with no recorded successor, so next_observations is the
-    next row within a trajectory and the row itself at its end; there are no terminals.
+    sum T.  An .npz with D4RL's keys instead (observations, actions, rewards, terminals, optional timeouts and
+    next_observations) is read as a D4RL file (`d4rl_arrays_to_dataset`; the env inferred from its dims unless
+    they are door's or `env` is given).  The last step of each trajectory is a time-out with no recorded successor,
+    so next_observations is the next row within a trajectory and the row itself at its end; there are no terminals.
 
     `clip_actions` defaults to True here: the door human demonstrations (the same transitions as D4RL's door-human)
     contain ~10k action values slightly beyond [-1, 1] (max |a| ~ 1.37), and the Adroit envs clip every action to
@@ -311,6 +324,9 @@ def read_door_npz(path, env: str = "door", clip_actions: bool = True) -> Dataset
             data = {k: z[k] for k in z.files}
     except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
         raise DatasetError(f"{path}: not a readable .npz file ({e or type(e).__name__})") from None
+    if "episode_lengths" not in data and all(k in data for k in D4RL_REQUIRED):  # an .npz with D4RL's keys
+        return d4rl_arrays_to_dataset(path, data, None if env == "door" and not door_dims(data) else env,
+                                      clip_actions=False)
     for key in ("observations", "actions", "rewards", "episode_lengths"):
         if key not in data:
             raise DatasetError(f"{path}: missing key '{key}' (found: {', '.join(sorted(data)) or 'none'})")
