@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import uuid
 from collections import defaultdict
 from pathlib import Path
 
@@ -86,7 +87,7 @@ class _WandB(_Logger):
         import wandb
 
         id_file = out_dir / "wandb-run-id"  # a resumed run continues the same wandb run
-        run_id = id_file.read_text().strip() if id_file.is_file() else wandb.util.generate_id()
+        run_id = id_file.read_text().strip() if id_file.is_file() else uuid.uuid4().hex[:12]
         try:
             self.run = wandb.init(project=os.environ.get("WANDB_PROJECT", "offrl_jax"), name=name, id=run_id,
                                   resume="allow", dir=str(out_dir), config=config)
