@@ -20,7 +20,7 @@ from tqdm.auto import tqdm
 
 from experiments.common import OneLineParser, refuse_existing
 from offrl_jax.checkpoint import atomic_write_text
-from offrl_jax.cli import check_writable_dir, int_at_least
+from offrl_jax.cli import check_writable_dir, int_at_least, seed_int
 from offrl_jax.envs import ENVS, make_env
 
 PAPER_TABLE4 = {"pen": -162.09, "door": -84.52, "hammer": -856.83, "relocate": -37.95}
@@ -50,7 +50,7 @@ def main(argv=None) -> int:
     ap.add_argument("--episodes", type=int_at_least(2), default=100, help="episodes per env (>= 2, for a standard "
                     "error; default %(default)s)")
     ap.add_argument("--envs", nargs="+", choices=tuple(PAPER_TABLE4), default=list(PAPER_TABLE4))
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=seed_int, default=0)
     ap.add_argument("--out", type=Path, default=None)
     ap.add_argument("--overwrite", action="store_true", help="replace the files of an earlier run in --out")
     args = ap.parse_args(argv)

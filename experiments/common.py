@@ -28,6 +28,7 @@ from offrl_jax.cli import (  # noqa: F401  (OneLineParser, positive_int: re-expo
     lock_run_dir,
     one_line_warnings,
     positive_int,
+    seed_int,
 )
 from offrl_jax.data.dataset import DatasetError
 from offrl_jax.loggers import LOGGERS
@@ -46,7 +47,7 @@ def run_args(parser: argparse.ArgumentParser, updates: int | None, eval_every: i
     """The run flags; `updates`/`eval_every` None leaves that flag out (a study that sets it itself)."""
     g = parser.add_argument_group("run")
     g.add_argument("--seeds", type=positive_int, default=seeds, help="number of seeds, vmapped (default %(default)s)")
-    g.add_argument("--seed-offset", type=int, default=0, help="first seed (seeds are offset..offset+N-1)")
+    g.add_argument("--seed-offset", type=seed_int, default=0, help="first seed (seeds are offset..offset+N-1)")
     if updates is not None:
         g.add_argument("--updates", type=positive_int, default=updates,
                        help="total gradient updates per variant, pre-training included (default %(default)s)")

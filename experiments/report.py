@@ -80,10 +80,13 @@ def main(argv=None) -> int:
                    help="with --plot: no behaviour-score line (drawing it loads each cached dataset once)")
     args = p.parse_args(argv)
     try:
+        if args.overlay and args.plot is None:
+            raise ValueError("--overlay draws into the figure of --plot FIG.png; give --plot too")
         if args.plot is not None:
             if args.plot.suffix.lower() != ".png":
                 raise ValueError(f"--plot {args.plot}: the name must end in .png")
             check_writable_file(args.plot)
+            check_writable_file(args.plot.with_suffix(".pdf"))
         if args.merge:
             if args.merge.is_dir() and any(args.merge.iterdir()):
                 what = "already holds a run" if (args.merge / "config.json").exists() else "is not empty"
@@ -93,13 +96,20 @@ def main(argv=None) -> int:
             args.dirs = [args.merge]
         for d in args.dirs:
             for path in summaries(d):
-                print(f"### {path.parent}\n\n{table(read_summary(path))}\n")
+                try:
+                    text = table(read_summary(path))
+                except (KeyError, TypeError, IndexError) as e:
+                    raise ValueError(f"{path}: not a run's summary (missing or empty {e})") from None
+                print(f"### {path.parent}\n\n{text}\n")
                 if args.curves:
                     print(curve_table(path.parent / "curves.csv") + "\n")
         if args.plot is not None:
             study_dirs = [path.parent for d in args.dirs for path in summaries(d)]
             for d in study_dirs:
-                read_summary(d / "summary.json")
+                try:
+                    table(read_summary(d / "summary.json"))
+                except (KeyError, TypeError, IndexError) as e:
+                    raise ValueError(f"{d / 'summary.json'}: not a run's summary (missing or empty {e})") from None
             written = plot_studies(study_dirs, args.plot, reference=not args.no_reference, overlay=args.overlay)
             print(f"figure: {', '.join(map(str, written))}", file=sys.stderr)
     except (OSError, ValueError, KeyError, IndexError) as e:

@@ -21,7 +21,7 @@ import numpy as np
 
 from experiments.common import OneLineParser, refuse_existing
 from offrl_jax.checkpoint import atomic_write_text
-from offrl_jax.cli import check_writable_dir, int_at_least, number, positive_int
+from offrl_jax.cli import check_writable_dir, int_at_least, number, positive_int, seed_int
 
 
 def random_mdp(rng: np.random.Generator, states: int, actions: int) -> tuple[np.ndarray, np.ndarray]:
@@ -144,7 +144,7 @@ def main(argv=None) -> int:
                     help="behaviour policies beta*greedy + (1-beta)*uniform (in [0, 1])")
     ap.add_argument("--delta", type=number(0, 1, low_open=True, high_open=True), default=1e-3,
                     help="target error as a fraction of ||Q*||, in (0, 1)")
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=seed_int, default=0)
     ap.add_argument("--out", type=Path, default=None, help="write rows.json, summary.json and theory.png here")
     ap.add_argument("--overwrite", action="store_true", help="replace the files of an earlier run in --out")
     ap.add_argument("--json", action="store_true", help="print the summary as JSON")

@@ -36,6 +36,17 @@ def positive_int(text: str) -> int:
     return value
 
 
+def seed_int(text: str) -> int:
+    """A random seed: an integer in [0, 2**31)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a seed (an integer in [0, 2**31)), got {text!r}") from None
+    if not 0 <= value < 2**31:
+        raise argparse.ArgumentTypeError(f"expected a seed (an integer in [0, 2**31)), got {text!r}")
+    return value
+
+
 def int_at_least(low: int) -> Callable[[str], int]:
     def convert(text: str) -> int:
         try:

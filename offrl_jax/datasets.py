@@ -21,7 +21,7 @@ import tempfile
 import warnings
 from pathlib import Path
 
-from offrl_jax.cli import OneLineParser, check_writable_dir, one_line_warnings, positive_int
+from offrl_jax.cli import OneLineParser, check_writable_dir, one_line_warnings, positive_int, seed_int
 from offrl_jax.data.dataset import Dataset, DatasetError, dataset_dir
 from offrl_jax.data.readers import load_dataset_path, minari_root, read_door_npz, read_minari
 from offrl_jax.envs import get_env_spec, normalized_score
@@ -189,7 +189,7 @@ def _parser() -> argparse.ArgumentParser:
                      help="cap on the number of transitions (default: 1M per policy; the whole run for replay "
                           "levels); a capped dataset in the cache is reported as such whenever it is loaded")
     gen.add_argument("--out", type=Path, default=None, help="dataset directory (default: the cache, see `list`)")
-    gen.add_argument("--seed", type=int, default=0, help="seed of the rollouts (envs and action noise)")
+    gen.add_argument("--seed", type=seed_int, default=0, help="seed of the rollouts (envs and action noise)")
     gen.add_argument("--overwrite", action="store_true", help="replace a dataset already generated there")
     return parser
 

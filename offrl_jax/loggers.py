@@ -105,14 +105,13 @@ class _WandB(_Logger):
         self.run.finish()
 
 
-def make_logger(kind: str, out_dir: Path, study, resume: bool = False) -> _Logger:
+def make_logger(kind: str, out_dir: Path, study, config: dict, resume: bool = False) -> _Logger:
     """A logger for the run in `out_dir`; ValueError (one line) for an unknown kind or a writer not installed."""
     if kind not in LOGGERS:
         raise ValueError(f"unknown logger '{kind}'; valid: {', '.join(LOGGERS)}")
     curves = out_dir / "curves.csv"
     seen = {(r["variant"], r["seed"], r["update"]) for r in read_curves(curves)} if resume and curves.is_file() \
         else set()
-    config = json.loads((out_dir / "config.json").read_text())
     try:
         if kind == "tensorboard":
             return _TensorBoard(out_dir, config, seen)

@@ -27,7 +27,7 @@ from flax import serialization
 
 from offrl_jax.algos import make_algorithm, make_config
 from offrl_jax.envs import get_env_spec
-from offrl_jax.resume import checkpoint_path
+from offrl_jax.resume import checkpoint_path, shape_mismatch
 from offrl_jax.study import Study, sweep_groups
 
 
@@ -100,11 +100,18 @@ def load_policy(run_dir: str | Path, variant: str | None = None, seed: int | Non
     if not path.is_file():
         raise ValueError(f"{path}: no checkpoint of '{variant}' (the run had not reached its first checkpoint, or "
                          "its checkpoints were not kept)")
-    payload = serialization.msgpack_restore(path.read_bytes())
+    try:
+        payload = serialization.msgpack_restore(path.read_bytes())
+        payload["states"], payload["update"]
+    except Exception as e:  # noqa: BLE001 -- any unreadable checkpoint gets the same one line
+        raise ValueError(f"{path}: not a readable checkpoint ({type(e).__name__}: {e})") from None
     if "obs_mean" not in payload:
         raise ValueError(f"{path}: made before checkpoints stored the observation statistics; train it again "
                          f"(--config {run_dir / 'config.json'}) to act from it")
     members = [[str(label), int(s)] for label, s in payload.get("members", [])]
+    if [variant, seed] not in members:
+        raise ValueError(f"{path}: holds no '{variant}' seed {seed} (it holds "
+                         f"{', '.join(f'{label} seed {s}' for label, s in members)}); it does not match config.json")
     member = members.index([variant, seed])
     spec = get_env_spec(payload.get("env", study.env))
     v = next(v for v in group if v.label == variant)
@@ -114,7 +121,11 @@ def load_policy(run_dir: str | Path, variant: str | None = None, seed: int | Non
     states = jax.tree.map(lambda x: np.asarray(x)[member], payload["states"])
     rows = int(np.shape(states["soft_returns"])[0]) if "soft_returns" in states else 1
     algo = make_algorithm(config, spec.obs_dim, spec.act_dim, rows)
-    state = serialization.from_state_dict(jax.eval_shape(algo.init, jax.random.PRNGKey(0)), states)
+    template = jax.eval_shape(algo.init, jax.random.PRNGKey(0))
+    problem = shape_mismatch(serialization.to_state_dict(template), states)
+    if problem:
+        raise ValueError(f"{path}: does not fit the networks of {run_dir / 'config.json'} ({problem})")
+    state = serialization.from_state_dict(template, states)
     state = jax.tree.map(jnp.asarray, state)
     mean, std = jnp.asarray(payload["obs_mean"]), jnp.asarray(payload["obs_std"])
     act = jax.jit(lambda obs: algo.act(state, (obs - mean) / std))

@@ -32,8 +32,11 @@ def read_curves(path: Path) -> list[dict]:
     (a metric another variant logs) are left out."""
     ints, texts = {"seed", "update"}, {"variant", "algo", "phase"}
     with open(path, newline="") as f:
-        return [{k: v if k in texts else int(v) if k in ints else float(v) for k, v in row.items() if v != ""}
-                for row in csv.DictReader(f)]
+        try:
+            return [{k: v if k in texts else int(v) if k in ints else float(v) for k, v in row.items()
+                     if v not in ("", None) and k is not None} for row in csv.DictReader(f)]
+        except (ValueError, TypeError) as e:
+            raise ValueError(f"{path}: not a curves.csv of this project ({e})") from None
 
 
 def pretrain_ends_of(rows: list[dict]) -> dict[str, int]:

@@ -132,7 +132,10 @@ def check_resume(study: Study, out_dir: Path, ds, data_sha256: str) -> None:
             raise ResumeMismatch(f"{path}: does not fit the networks of {out_dir / 'config.json'} ({problem}); "
                                  "nothing was changed")
         strangers = sorted({str(r.get("variant")) for r in history} - labels)
-        if update > study.updates or strangers:
-            why = f"it is at update {update}, past the budget of {study.updates}" if update > study.updates else \
-                f"it holds rows of other variants ({', '.join(strangers[:3])})"
+        last_row = max((r.get("update", -1) for r in history if isinstance(r, dict)), default=update)
+        if update > study.updates or update < 0 or last_row != update or strangers:
+            why = (f"it is at update {update}, past the budget of {study.updates}" if update > study.updates else
+                   f"its update counter ({update}) does not match its last evaluation ({last_row})"
+                   if update < 0 or last_row != update else
+                   f"it holds rows of other variants ({', '.join(strangers[:3])})")
             raise ResumeMismatch(f"{path}: does not belong to this run ({why}); nothing was changed")

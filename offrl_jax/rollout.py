@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from offrl_jax.cli import OneLineParser, check_writable_file, positive_int
+from offrl_jax.cli import OneLineParser, check_writable_file, one_line_warnings, positive_int
 
 
 def rollout(policy, episodes: int, video: Path | None = None, max_frames: int | None = None) -> np.ndarray:
@@ -43,6 +43,7 @@ def rollout(policy, episodes: int, video: Path | None = None, max_frames: int | 
         if video is not None:
             import imageio.v2 as imageio
 
+            video.parent.mkdir(parents=True, exist_ok=True)
             imageio.mimwrite(video, frames, fps=env.metadata.get("render_fps", 30))
     finally:
         env.close()
@@ -60,6 +61,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--video", type=Path, default=None, help="write the episodes as a video (.mp4 or .gif)")
     p.add_argument("--max-frames", type=positive_int, default=None, help="stop recording after this many frames")
     args = p.parse_args(argv)
+    one_line_warnings()
     try:
         if args.video is not None:
             if args.video.suffix.lower() not in (".mp4", ".gif"):

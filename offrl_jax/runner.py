@@ -63,9 +63,14 @@ def run_study(study: Study, out_dir: Path, dataset: Dataset, resume: bool = Fals
     out_dir.mkdir(parents=True, exist_ok=True)
     config_path = out_dir / "config.json"  # a resumed multi-study run may not have begun this study yet
     previous = config_path.read_text() if resume and config_path.exists() else None
-    atomic_write_text(config_path, study.record_json(dataset, previous))
-    if logger is not None:
-        logger = make_logger(logger, out_dir, study, resume)
+    record = study.record_json(dataset, previous)
+    if logger is not None:  # a logger that cannot start (no wandb login, ...) is a warning: the run goes on
+        try:
+            logger = make_logger(logger, out_dir, study, json.loads(record), resume)
+        except ValueError as e:
+            print(f"warning: {e}; the run goes on without it (curves.csv is the record)", file=sys.stderr)
+            logger = None
+    atomic_write_text(config_path, record)
     bar = _Progress(len(study.variants) * study.updates, progress)
     recorder = _Recorder(out_dir / "curves.csv", [v.label for v in study.variants], logger)
     pretrain_ends: dict[str, int] = {}

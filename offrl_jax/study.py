@@ -49,10 +49,13 @@ class Study:
 
     def __post_init__(self):
         for name in ("updates", "eval_every", "eval_episodes", "batch_size"):
-            if getattr(self, name) <= 0:
-                raise ValueError(f"Study.{name} = {getattr(self, name)} must be positive")
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value <= 0:
+                raise ValueError(f"Study.{name} = {value!r} must be a positive integer")
         if not self.seeds:
             raise ValueError("Study.seeds must not be empty")
+        if not all(isinstance(s, int) and not isinstance(s, bool) and 0 <= s < 2**31 for s in self.seeds):
+            raise ValueError(f"Study.seeds = {self.seeds!r} must be integers in [0, 2**31)")
         if self.checkpoint_every < 0:
             raise ValueError(f"Study.checkpoint_every = {self.checkpoint_every} must be >= 0")
         labels = [v.label for v in self.variants]

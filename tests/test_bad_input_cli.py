@@ -94,6 +94,12 @@ def _one_line_error(module: str, *args: str, cwd=None):
     ("experiments.mujoco_medium", ["--alpha", "inf"], "finite number"),
     ("experiments.mujoco_medium", ["--algo", "bc"], "has no effect on the BC baseline"),
     ("benchmarks.parallel", ["--seeds", "0"], "positive integer"),
+    ("experiments.mujoco_medium", ["--seed-offset", "99999999999999999999999"], "expected a seed"),
+    ("offrl_jax.datasets", ["generate", "hopper-medium", "--transitions", "10", "--seed", "-1"], "expected a seed"),
+    ("experiments.theory", ["--seed", "-1"], "expected a seed"),
+    ("experiments.adroit_random_scores", ["--seed", "-1"], "expected a seed"),
+    ("experiments.report", ["results/figure2/hopper-edac", "--overlay"], "give --plot too"),
+    ("experiments.mujoco_medium", ["--cql-weight", "1", "--cql-actions", "0"], "cql_actions = 0 must be >= 1"),
     ("benchmarks.parallel", ["--cases", "gpu"], "invalid choice"),
     # a missing file
     ("benchmarks.throughput", ["--markdown", "/nonexistent.jsonl"], "/nonexistent.jsonl"),

@@ -92,7 +92,7 @@ def test_wandb_offline_writes_a_run(tmp_path, monkeypatch):
 
 def test_an_unknown_logger_is_one_line(tmp_path):
     with pytest.raises(ValueError, match="unknown logger 'mlflow'"):
-        make_logger("mlflow", tmp_path, tiny("x"))
+        make_logger("mlflow", tmp_path, tiny("x"), {})
 
 
 def test_without_a_progress_bar_every_evaluation_is_one_plain_line(tmp_path, capsys):

@@ -92,6 +92,18 @@ def test_a_checkpoint_with_rows_of_other_variants_is_refused(half_run, tmp_path)
         run_study(tiny_study(), run, synthetic_dataset(), resume=True, progress=False)
 
 
+def test_a_checkpoint_whose_counter_disagrees_with_its_rows_is_refused(half_run, tmp_path):
+    run = resumed_copy(half_run, tmp_path)
+    path = run / "checkpoints" / "scratch.msgpack"
+    payload = serialization.msgpack_restore(path.read_bytes())
+    payload["update"] = -100
+    path.write_bytes(serialization.msgpack_serialize(payload))
+    before = digest(run)
+    with pytest.raises(ResumeMismatch, match=r"update counter \(-100\) does not match its last evaluation \(100\)"):
+        run_study(tiny_study(), run, synthetic_dataset(), resume=True, progress=False)
+    assert digest(run) == before
+
+
 def test_an_unreadable_checkpoint_is_one_line(half_run, tmp_path):
     run = resumed_copy(half_run, tmp_path)
     (run / "checkpoints" / "scratch.msgpack").write_bytes(b"\x00not msgpack")

@@ -20,6 +20,8 @@ from offrl_jax.study import Study, Variant
     ("td3bc", {"no_such_field": 1}, "'no_such_field' is not a hyper-parameter of td3bc"),
     ("dqn", {}, "unknown algorithm 'dqn'; valid: bc, td3bc"),
     ("bc", {"pretrain": "none"}, "pretrain = 'none' has no effect on the BC baseline"),
+    ("td3bc_cql", {"cql_actions": 0}, "cql_actions = 0 must be >= 1"),
+    ("edac", {"entropy_batch": 0}, "entropy_batch = 0 must be >= 1"),
     ("bc", {"pretrain": "actor+critic"}, "pretrain = 'actor+critic' has no effect on the BC baseline"),
     ("bc", {"pretrain_auto": True}, "pretrain_auto = True has no effect on the BC baseline"),
 ])
@@ -30,10 +32,12 @@ def test_config_rejects(algo, overrides, message):
 
 
 @pytest.mark.parametrize("fields, message", [
-    ({"updates": 0}, "Study.updates = 0 must be positive"),
-    ({"batch_size": -1}, "Study.batch_size = -1 must be positive"),
-    ({"eval_every": 0}, "Study.eval_every = 0 must be positive"),
+    ({"updates": 0}, "Study.updates = 0 must be a positive integer"),
+    ({"batch_size": -1}, "Study.batch_size = -1 must be a positive integer"),
+    ({"eval_every": 0}, "Study.eval_every = 0 must be a positive integer"),
     ({"seeds": ()}, "Study.seeds must not be empty"),
+    ({"seeds": ("abc",)}, "must be integers in [0, 2**31)"),
+    ({"updates": 100.5}, "Study.updates = 100.5 must be a positive integer"),
     ({"env": "cartpole"}, "unknown env 'cartpole'; valid: hopper"),
     ({"variants": (Variant.of("a", "td3bc"), Variant.of("a", "td3bc"))}, "unique labels"),
 ])

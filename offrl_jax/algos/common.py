@@ -175,6 +175,7 @@ def validate_common(cfg) -> None:
          "must be one of none, actor, critic, actor+critic"),
         ("lambda_mode", cfg.lambda_mode in ("loss", "target"), "must be 'loss' or 'target'"),
         ("num_critics", cfg.num_critics >= 1, "must be >= 1"),
+        ("cql_actions", cfg.cql_actions >= 1, "must be >= 1"),
         ("actor_hidden", cfg.actor_hidden is None or (len(cfg.actor_hidden) > 0 and all(h > 0 for h in
                                                                                         cfg.actor_hidden)),
          "must be positive layer widths"),

@@ -98,6 +98,8 @@ class EDACConfig:
 
     def __post_init__(self):
         validate_common(self)
+        if self.entropy_batch < 1:
+            raise ValueError(f"EDACConfig.entropy_batch = {self.entropy_batch} must be >= 1")
         if not self.eta >= 0:
             raise ValueError(f"EDACConfig.eta = {self.eta} must be >= 0")
         if self.eta > 0 and self.num_critics < 2:
