@@ -307,7 +307,10 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
             m = lines.pop(0)["meta"]
             print(f"`{m['command']}` — {m['date']}, {m['machine']}, load average at start {m['load_avg']}, "
                   f"{m.get('seconds', '?')} s, 1024² matmul {m.get('matmul1024_gflops', '?')} GFLOP/s\n")
-        print(markdown(lines))
+        try:
+            print(markdown(lines))
+        except (KeyError, TypeError) as e:
+            p.error(f"{args.markdown}: not a results file of this benchmark (missing {e})")
         return lines
     if args.quick:
         cases, seed_counts = [QUICK_CASE], [1]

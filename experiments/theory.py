@@ -135,8 +135,8 @@ def main(argv=None) -> int:
     ap = OneLineParser(prog="experiments.theory", description=__doc__,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--mdps", type=positive_int, default=20)
-    ap.add_argument("--states", type=int_at_least(2), default=50)
-    ap.add_argument("--actions", type=int_at_least(2), default=4)
+    ap.add_argument("--states", type=int_at_least(2, 10_000), default=50)
+    ap.add_argument("--actions", type=int_at_least(2, 1_000), default=4)
     ap.add_argument("--gamma", type=number(0, 1, low_open=True, high_open=True), default=0.99)
     ap.add_argument("--eps", type=number(0), nargs="+", default=[0.0, 0.01],
                     help="approximation errors per iteration (>= 0)")

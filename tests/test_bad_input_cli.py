@@ -97,6 +97,7 @@ def _one_line_error(module: str, *args: str, cwd=None):
     ("experiments.mujoco_medium", ["--seed-offset", "99999999999999999999999"], "expected a seed"),
     ("offrl_jax.datasets", ["generate", "hopper-medium", "--transitions", "10", "--seed", "-1"], "expected a seed"),
     ("experiments.theory", ["--seed", "-1"], "expected a seed"),
+    ("experiments.theory", ["--actions", "99999999999999999"], "expected an integer in [2, 1000]"),
     ("experiments.adroit_random_scores", ["--seed", "-1"], "expected a seed"),
     ("experiments.report", ["results/figure2/hopper-edac", "--overlay"], "give --plot too"),
     ("experiments.mujoco_medium", ["--cql-weight", "1", "--cql-actions", "0"], "cql_actions = 0 must be >= 1"),
