@@ -149,8 +149,11 @@ def test_cli_info_file(tmp_path):
 def test_cli_list(tmp_path):
     result = run_cli("list", env={"OFFRL_JAX_CACHE": str(tmp_path)})
     assert result.returncode == 0, result.stderr
-    lines = {line.split()[0]: line for line in result.stdout.splitlines()}
+    first, *rest = result.stdout.splitlines()
+    lines = {line.split()[0]: line for line in rest}
+    assert first.startswith("cache: ")
     assert set(lines) == set(datasets.KNOWN) and "not cached" in lines["hopper-medium"]
+    assert lines["door-human"].split()[1] == "shipped"
 
 
 def test_cli_shared_dir_override(tmp_path):
