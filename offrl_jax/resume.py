@@ -90,6 +90,8 @@ def shape_mismatch(expected: Any, found: Any, where: str = "") -> str | None:
             if problem:
                 return problem
         return None
+    if expected is None or found is None:  # an empty slot (e.g. a model without a target network)
+        return None if expected is None and found is None else f"{where}: {found!r:.40}, expected {expected!r:.40}"
     shape = tuple(np.shape(found))
     return None if shape == tuple(expected.shape) else f"{where}: shape {shape}, expected {tuple(expected.shape)}"
 

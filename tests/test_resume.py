@@ -173,11 +173,21 @@ def test_a_multi_study_resume_checks_every_study_before_writing(tmp_path):
     assert "Traceback" not in result.stderr and digest(out) == before
 
 
+def test_an_edac_run_resumes(tmp_path):
+    """EDAC's state has empty slots (no target for the actor and the temperature): they check as equal."""
+    edac = dataclasses.replace(tiny_study(), variants=(Variant.of("edac", "edac", pretrain="none", hidden=(16, 16),
+                                                                  num_critics=2),))
+    run_study(dataclasses.replace(edac, updates=100), tmp_path, synthetic_dataset(), progress=False)
+    run_study(edac, tmp_path, synthetic_dataset(), resume=True, progress=False)
+    assert "200" in (tmp_path / "curves.csv").read_text().splitlines()[-1].split(",")
+
+
 def test_shape_mismatch_names_the_first_difference():
-    expected = {"a": {"w": np.zeros((2, 3))}, "b": np.zeros(4)}
-    assert shape_mismatch(expected, {"a": {"w": np.ones((2, 3))}, "b": np.ones(4)}) is None
-    assert shape_mismatch(expected, {"a": {"w": np.ones((2, 5))}, "b": np.ones(4)}) == \
+    expected = {"a": {"w": np.zeros((2, 3))}, "b": np.zeros(4), "none": None}
+    assert shape_mismatch(expected, {"a": {"w": np.ones((2, 3))}, "b": np.ones(4), "none": None}) is None
+    assert "/none" in shape_mismatch(expected, {"a": {"w": np.ones((2, 3))}, "b": np.ones(4), "none": np.ones(1)})
+    assert shape_mismatch(expected, {"a": {"w": np.ones((2, 5))}, "b": np.ones(4), "none": None}) == \
         "/a/w: shape (2, 5), expected (2, 3)"
-    assert "expected entries ['b'] not found" in shape_mismatch(expected, {"a": {"w": np.ones((2, 3))}})
+    assert "expected entries ['b', 'none'] not found" in shape_mismatch(expected, {"a": {"w": np.ones((2, 3))}})
     assert "unexpected entries ['c']" in shape_mismatch(expected, {"a": {"w": np.ones((2, 3))}, "b": np.ones(4),
-                                                                   "c": 1})
+                                                                   "none": None, "c": 1})
