@@ -149,6 +149,7 @@ def test_a_config_field_added_since_is_no_difference_at_its_default():
         ["v: new_switch '(absent)' -> True"]
 
 
+@pytest.mark.slow  # two CLI runs of two studies each (~2 minutes); the check itself is the one tested above
 def test_a_multi_study_resume_checks_every_study_before_writing(tmp_path):
     """--resume --updates N on a run of several studies: a foreign checkpoint in the second study is refused before
     the first study (or the top-level config.json) is touched."""
