@@ -28,7 +28,7 @@ from flax import serialization
 from offrl_jax.algos import make_algorithm, make_config
 from offrl_jax.envs import get_env_spec
 from offrl_jax.resume import checkpoint_path, shape_mismatch
-from offrl_jax.study import Study, sweep_groups
+from offrl_jax.study import Study
 
 
 @dataclasses.dataclass
@@ -93,7 +93,7 @@ def load_policy(run_dir: str | Path, variant: str | None = None, seed: int | Non
     seed = study.seeds[0] if seed is None else seed
     if seed not in study.seeds:
         raise ValueError(f"{run_dir}: no seed {seed}; the run has seeds {', '.join(map(str, study.seeds))}")
-    groups = sweep_groups(study.variants) if study.vmap_sweeps else [((v,), None) for v in study.variants]
+    groups = study.groups()
     group = next(g for g, _ in groups if variant in [v.label for v in g])
     path = checkpoint_path(run_dir, group if checkpoint == "last" else tuple(v for v in group if v.label == variant),
                            checkpoint)

@@ -28,7 +28,7 @@ from flax import serialization
 from offrl_jax.algos import make_algorithm, make_config
 from offrl_jax.driver import INIT, seed_keys
 from offrl_jax.results import read_curves
-from offrl_jax.study import Study, Variant, sweep_groups
+from offrl_jax.study import Study, Variant
 
 
 class ResumeMismatch(ValueError):
@@ -98,7 +98,7 @@ def shape_mismatch(expected: Any, found: Any, where: str = "") -> str | None:
 
 def check_resume(study: Study, out_dir: Path, ds, data_sha256: str) -> None:
     """Raise ResumeMismatch if a checkpoint in `out_dir` does not belong to `study` on `ds` (see the module)."""
-    groups = sweep_groups(study.variants) if study.vmap_sweeps else [((v,), None) for v in study.variants]
+    groups = study.groups()
     curves = out_dir / "curves.csv"
     try:
         rows = read_curves(curves) if curves.is_file() else []

@@ -37,7 +37,7 @@ from offrl_jax.loggers import make_logger
 from offrl_jax.provenance import fingerprint
 from offrl_jax.results import plot_curves, pretrain_ends_of, summarize, summary_json, write_curves
 from offrl_jax.resume import check_resume, checkpoint_path, group_identity
-from offrl_jax.study import Study, Variant, sweep_groups
+from offrl_jax.study import Study, Variant
 from offrl_jax.workers import run_in_processes
 
 
@@ -74,7 +74,7 @@ def run_study(study: Study, out_dir: Path, dataset: Dataset, resume: bool = Fals
     bar = _Progress(len(study.variants) * study.updates, progress)
     recorder = _Recorder(out_dir / "curves.csv", [v.label for v in study.variants], logger)
     pretrain_ends: dict[str, int] = {}
-    groups = sweep_groups(study.variants) if study.vmap_sweeps else [((v,), None) for v in study.variants]
+    groups = study.groups()
 
     def run(group: tuple[tuple[Variant, ...], str | None]) -> None:
         end = _run_group(study, *group, dataset, data_sha256, out_dir, resume, bar, recorder)

@@ -69,6 +69,11 @@ class Study:
             phases = make_algorithm(config, obs_dim=1, act_dim=1, num_transitions=1).phases(self.updates)
             check_call_grid(phases, self.eval_every)
 
+    def groups(self) -> list[tuple[tuple[Variant, ...], str | None]]:
+        """The programs the study trains: (variants, swept name) each; a vmapped sweep group, or one variant alone
+        when `vmap_sweeps` is off (see `sweep_groups`)."""
+        return sweep_groups(self.variants) if self.vmap_sweeps else [((v,), None) for v in self.variants]
+
     def to_json(self) -> str:
         return json.dumps(dataclasses.asdict(self), indent=2)
 

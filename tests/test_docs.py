@@ -1,5 +1,5 @@
 """What a user reads speaks of the project and its results only: no words about how the work was organised
-(sessions, issue numbers, work periods) in the README, RESULTS.md, docs/, benchmarks/README.md, the code's
+(see PROCESS_WORDS) in the README, RESULTS.md, docs/, benchmarks/README.md, the code's
 comments and docstrings, or any --help."""
 from __future__ import annotations
 
