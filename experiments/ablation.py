@@ -7,11 +7,16 @@ variant, evaluation every 2.5k (4 variants: ~40 min on 2 cores).  The paper: 1M 
 """
 import sys
 
-from experiments.common import main_guard
+from experiments.common import UsageError, main_guard
 from experiments.mujoco_medium import PRETRAIN, make_study, parser, pretrain_variants
+from offrl_jax.algos import ALGOS
 
 
 def build(args):
+    if args.algo == "bc":
+        raise UsageError("--algo bc: the ablation compares pre-training modes, and the BC baseline has none to "
+                         "compare (every update is a BC update); choose one of "
+                         + ", ".join(a for a in ALGOS if a != "bc"))
     return make_study(args.env, args.algo, args.level, args, variants=pretrain_variants(args.algo, PRETRAIN, args),
                       reference="scratch", name=f"ablation-{args.env}-{args.level}-{args.algo}")
 

@@ -28,6 +28,7 @@ from offrl_jax.cli import (  # noqa: F401  (OneLineParser, positive_int: re-expo
     lock_run_dir,
     one_line_warnings,
     positive_int,
+    print_error,
     seed_int,
 )
 from offrl_jax.data.dataset import DatasetError
@@ -303,7 +304,7 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
     except (UsageError, DatasetError, ValueError, OSError, Diverged) as e:
         if os.environ.get("OFFRL_JAX_DEBUG") == "1":  # the traceback, for whoever is debugging the code
             raise
-        print(f"error: {e}", file=sys.stderr)
+        print_error(e)
         return 3 if isinstance(e, Diverged) else 2
     except KeyboardInterrupt:
         where = f"; resume with --resume {out}" if out is not None and (out / "config.json").is_file() else ""

@@ -27,7 +27,7 @@ from collections import defaultdict
 from pathlib import Path
 
 from experiments.common import OneLineParser
-from offrl_jax.cli import check_writable_dir, check_writable_file
+from offrl_jax.cli import check_writable_dir, check_writable_file, print_error
 from offrl_jax.figures import plot_studies
 from offrl_jax.results import merge_runs, read_curves, summary_table as table
 
@@ -113,7 +113,7 @@ def main(argv=None) -> int:
             written = plot_studies(study_dirs, args.plot, reference=not args.no_reference, overlay=args.overlay)
             print(f"figure: {', '.join(map(str, written))}", file=sys.stderr)
     except (OSError, ValueError, KeyError, IndexError) as e:
-        print(f"error: {e}", file=sys.stderr)
+        print_error(e)
         return 2
     return 0
 

@@ -11,6 +11,12 @@ from collections.abc import Callable
 from pathlib import Path
 
 
+def print_error(message: object) -> None:
+    """One line on stderr, whatever the message holds: a newline in a path or a value is shown as \\n."""
+    text = str(message).replace("\r", "\\r").replace("\n", "\\n")
+    print(f"error: {text}", file=sys.stderr)
+
+
 class OneLineParser(argparse.ArgumentParser):
     """argparse with a one-line error (argparse prints usage + error) and no prefix matching of flags ("--pretrain"
     must not silently mean "--pretrain-updates")."""
@@ -19,20 +25,24 @@ class OneLineParser(argparse.ArgumentParser):
         super().__init__(*args, **{"allow_abbrev": False} | kwargs)
 
     def error(self, message: str):
-        print(f"error: {message}", file=sys.stderr)
+        print_error(message)
         sys.exit(2)
 
 
+COUNT_MAX = 2**31 - 1  # counters (updates, evaluation steps) are int32 inside the jitted programs
+
+
 def positive_int(text: str) -> int:
-    try:  # "1e6" is accepted, "2.5e0" and "1e400" are not
+    """A count: an integer in [1, 2**31); "1e6" is accepted, "2.5e0", "1e400" and "1e26" are not."""
+    try:
         number = float(text) if "e" in text.lower() else int(text)
         value = int(number)
         if value != number:
             raise ValueError
     except (ValueError, OverflowError):
         raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if value <= 0:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
+    if not 0 < value <= COUNT_MAX:
+        raise argparse.ArgumentTypeError(f"expected a positive integer below 2**31, got {text!r}")
     return value
 
 

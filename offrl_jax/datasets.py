@@ -21,7 +21,7 @@ import tempfile
 import warnings
 from pathlib import Path
 
-from offrl_jax.cli import OneLineParser, check_writable_dir, one_line_warnings, positive_int, seed_int
+from offrl_jax.cli import OneLineParser, check_writable_dir, one_line_warnings, positive_int, print_error, seed_int
 from offrl_jax.data.dataset import Dataset, DatasetError, dataset_dir
 from offrl_jax.data.readers import load_dataset_path, minari_root, read_door_npz, read_minari
 from offrl_jax.envs import get_env_spec, normalized_score
@@ -225,7 +225,7 @@ def main(argv: list[str] | None = None) -> int:
             print(generate(args.name, transitions=args.transitions, out_dir=args.out, seed=args.seed,
                            overwrite=args.overwrite))
     except (DatasetError, ValueError, OSError) as e:
-        print(f"error: {' '.join(str(e).split())}", file=sys.stderr)
+        print_error(e)
         return 2
     return 0
 

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from offrl_jax.cli import OneLineParser, check_writable_file, one_line_warnings, positive_int
+from offrl_jax.cli import OneLineParser, check_writable_file, one_line_warnings, positive_int, print_error
 
 
 def rollout(policy, episodes: int, video: Path | None = None, max_frames: int | None = None) -> np.ndarray:
@@ -82,7 +82,7 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         returns = rollout(policy, args.episodes, args.video, args.max_frames)
     except (ValueError, OSError) as e:
-        print(f"error: {e}", file=sys.stderr)
+        print_error(e)
         return 2
     scores = normalized_score(policy.env, returns)
     for e, (ret, score) in enumerate(zip(returns, scores)):

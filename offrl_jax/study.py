@@ -50,8 +50,8 @@ class Study:
     def __post_init__(self):
         for name in ("updates", "eval_every", "eval_episodes", "batch_size"):
             value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value <= 0:
-                raise ValueError(f"Study.{name} = {value!r} must be a positive integer")
+            if isinstance(value, bool) or not isinstance(value, int) or not 0 < value < 2**31:
+                raise ValueError(f"Study.{name} = {value!r} must be a positive integer below 2**31")
         if not self.seeds:
             raise ValueError("Study.seeds must not be empty")
         if not all(isinstance(s, int) and not isinstance(s, bool) and 0 <= s < 2**31 for s in self.seeds):

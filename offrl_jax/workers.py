@@ -204,7 +204,7 @@ def run_in_processes(target: Callable, tasks: list[tuple], parallel: int, bar, r
                     process.terminate()
     except KeyboardInterrupt:  # Ctrl-C in the parent: the workers stop at their next chunk boundary
         fail(KeyboardInterrupt())
-        bar.write("interrupted: stopping the worker processes at their next chunk boundary", file=sys.stderr)
+        bar.write("stopping the worker processes at their next chunk boundary (Ctrl-C again: now)", file=sys.stderr)
         while running:
             try:
                 ready = wait([conn for _, conn, _ in running.values()], timeout=1.0)

@@ -35,6 +35,12 @@ def zero_length_episode(tmp_path):
     return write_npz(tmp_path / "door.npz", lengths=(10, 0, 20)), "length 0"
 
 
+def garbage_npz(tmp_path):
+    path = tmp_path / "door.npz"
+    path.write_bytes(bytes(range(256)) * 4)  # numpy would try this as a pickle and say so
+    return path, "not a .npz file"
+
+
 def minari_without_metadata(tmp_path):
     data = tmp_path / "minari-ds" / "data"
     data.mkdir(parents=True)
@@ -43,7 +49,7 @@ def minari_without_metadata(tmp_path):
 
 
 @pytest.mark.parametrize("make", [missing_key, different_lengths, empty, corrupt, zero_length_episode,
-                                  minari_without_metadata])
+                                  garbage_npz, minari_without_metadata])
 def test_cli_rejects_with_one_line(tmp_path, make):
     path, fragment = make(tmp_path)
     assert_cli_error(run_cli("info", path), str(path), fragment)
@@ -93,6 +99,8 @@ def _one_line_error(module: str, *args: str, cwd=None):
     ("benchmarks.throughput", ["--reps", "0"], "positive integer"),
     ("experiments.mujoco_medium", ["--alpha", "inf"], "finite number"),
     ("experiments.mujoco_medium", ["--algo", "bc"], "has no effect on the BC baseline"),
+    ("experiments.ablation", ["--algo", "bc"], "the BC baseline has none to compare"),
+    ("experiments.mujoco_medium", ["--updates", "1e26"], "positive integer below 2**31"),
     ("benchmarks.parallel", ["--seeds", "0"], "positive integer"),
     ("experiments.mujoco_medium", ["--seed-offset", "99999999999999999999999"], "expected a seed"),
     ("offrl_jax.datasets", ["generate", "hopper-medium", "--transitions", "10", "--seed", "-1"], "expected a seed"),
@@ -109,6 +117,20 @@ def _one_line_error(module: str, *args: str, cwd=None):
 ])
 def test_entry_point_refuses_bad_values_in_one_line(module, args, message):
     assert message in _one_line_error(module, *args)
+
+
+@pytest.mark.parametrize("module, args", [
+    ("experiments.mujoco_medium", ["--dataset-path", "/tmp/a\nb.hdf5"]),
+    ("offrl_jax.datasets", ["info", "/tmp/a\nb.hdf5"]),
+    ("experiments.report", ["/tmp/a\nb"]),
+])
+def test_a_newline_in_a_path_stays_on_the_one_error_line(module, args):
+    import subprocess
+    import sys
+
+    result = subprocess.run([sys.executable, "-m", module, *args], capture_output=True, text=True, timeout=300)
+    assert result.returncode == 2 and result.stderr.count("\n") == 1, result.stderr
+    assert result.stderr.startswith("error: ") and "a\\nb" in result.stderr, result.stderr
 
 
 @pytest.mark.parametrize("module, args", [

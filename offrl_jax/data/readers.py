@@ -319,10 +319,16 @@ def read_door_npz(path, env: str = "door", clip_actions: bool = True) -> Dataset
     """
     path = Path(path)
     _require_file(path)
+    if not zipfile.is_zipfile(path):  # np.load would try it as a pickle and say so
+        raise DatasetError(f"{path}: not a .npz file (a .npz is a zip archive of arrays; this file is not one)")
     try:
         with np.load(path, allow_pickle=False) as z:
             data = {k: z[k] for k in z.files}
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
+    except ValueError as e:
+        if "pickle" in str(e):
+            raise DatasetError(f"{path}: holds object arrays, which are not read (only numeric arrays are)") from None
+        raise DatasetError(f"{path}: not a readable .npz file ({e})") from None
+    except (OSError, EOFError, zipfile.BadZipFile) as e:
         raise DatasetError(f"{path}: not a readable .npz file ({e or type(e).__name__})") from None
     if "episode_lengths" not in data and all(k in data for k in D4RL_REQUIRED):  # an .npz with D4RL's keys
         return d4rl_arrays_to_dataset(path, data, None if env == "door" and not door_dims(data) else env,

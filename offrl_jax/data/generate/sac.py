@@ -40,7 +40,7 @@ import optax
 
 from offrl_jax import losses
 from offrl_jax.checkpoint import atomic_write_bytes, atomic_write_text
-from offrl_jax.cli import OneLineParser
+from offrl_jax.cli import OneLineParser, print_error
 from offrl_jax.data.generate.collect import ACTOR_HIDDEN, actor_module, evaluate, make_gen_env
 from offrl_jax.data.generate.replay import ReplayBuffer, chunk_range, load_replay
 from offrl_jax.envs import get_env_spec, normalized_score
@@ -354,7 +354,7 @@ def main(argv: list[str] | None = None) -> None:
         run = train(a.env, steps, a.resume or a.out, a.seed, cfg, a.eval_every, a.eval_episodes, a.stop_score,
                     not a.no_progress, resume=a.resume is not None)
     except (FileNotFoundError, FileExistsError, ValueError) as e:
-        print(f"error: {e}", file=sys.stderr)
+        print_error(e)
         sys.exit(2)
     best = max(run["checkpoints"], key=lambda c: c["eval_return"], default=None)
     print(json.dumps({"steps_done": run["steps_done"], "stopped": run["stopped"], "best": best}))
