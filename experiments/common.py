@@ -282,11 +282,12 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
             if study.batch_size > len(ds):
                 raise UsageError(f"--batch-size {study.batch_size} is larger than the dataset ({len(ds):,} "
                                  f"transitions of {study.dataset})")
+        shas = [fingerprint(ds) for ds in data]
         if args.resume is not None:  # every study's checkpoints must be its own, before anything is written
-            for study, ds in zip(studies, data):
+            for study, ds, sha in zip(studies, data, shas):
                 study_out = out / study.name if isinstance(built, list) else out
                 if (study_out / "checkpoints").is_dir():
-                    check_resume(study, study_out, ds, fingerprint(ds))
+                    check_resume(study, study_out, ds, sha)
             if "updates" in given and isinstance(built, list):
                 atomic_write_text(out / "config.json", studies_json(built))
         if replace:
@@ -294,11 +295,11 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
         if isinstance(built, list) and args.resume is None:
             out.mkdir(parents=True, exist_ok=True)  # the whole studies, so --resume can start those not begun yet
             atomic_write_text(out / "config.json", studies_json(built))
-        for study, ds in zip(studies, data):
+        for study, ds, sha in zip(studies, data, shas):
             study_out = out / study.name if isinstance(built, list) else out
             print(f"{study.name}: {len(ds):,} transitions of {study.dataset}; writing to {study_out}", file=sys.stderr)
             summary = run_study(study, study_out, ds, resume=args.resume is not None, progress=not args.no_progress,
-                                parallel=args.parallel, logger=args.logger)
+                                parallel=args.parallel, logger=args.logger, data_sha256=sha)
             print_table(summary)
             print(f"results: {study_out}/summary.json, curves.csv, curves.png", file=sys.stderr)
     except (UsageError, DatasetError, ValueError, OSError, Diverged) as e:

@@ -78,15 +78,15 @@ def fingerprint(ds) -> str:
     return digest.hexdigest()
 
 
-def dataset_identity(ds, source: str) -> dict[str, Any]:
+def dataset_identity(ds, source: str, sha256: str | None = None) -> dict[str, Any]:
     return {"source": source, "name": getattr(ds, "name", None), "transitions": len(ds),
-            "sha256": fingerprint(ds)}
+            "sha256": sha256 or fingerprint(ds)}
 
 
-def run_record(ds=None, source: str = "") -> dict[str, Any]:
-    """Everything above, with the time it was taken."""
+def run_record(ds=None, source: str = "", sha256: str | None = None) -> dict[str, Any]:
+    """Everything above, with the time it was taken (`sha256`: the dataset's fingerprint, if already computed)."""
     record = {"time": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "command": command_line(), "git": git_state(),
               "versions": versions(), "backend": backend()}
     if ds is not None:
-        record["dataset"] = dataset_identity(ds, source)
+        record["dataset"] = dataset_identity(ds, source, sha256)
     return record

@@ -82,11 +82,12 @@ class Study:
         return {v.label: dataclasses.asdict(make_config(v.algo, self.env, self.dataset, **dict(v.overrides)))
                 for v in self.variants}
 
-    def record_json(self, ds: Dataset | None = None, previous: str | None = None) -> str:
+    def record_json(self, ds: Dataset | None = None, previous: str | None = None,
+                    data_sha256: str | None = None) -> str:
         """config.json: the study, its resolved configs, and the run records so far plus this one."""
         runs = json.loads(previous).get("runs", []) if previous else []
         raw = dataclasses.asdict(self) | {"resolved": self.resolved(),
-                                          "runs": runs + [run_record(ds, self.dataset)]}
+                                          "runs": runs + [run_record(ds, self.dataset, data_sha256)]}
         return json.dumps(raw, indent=2, default=list) + "\n"
 
     @staticmethod
