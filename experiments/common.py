@@ -25,6 +25,7 @@ from offrl_jax.checkpoint import atomic_write_text
 from offrl_jax.cli import (  # noqa: F401  (OneLineParser, positive_int: re-exported, the studies import them here)
     OneLineParser,
     check_writable_dir,
+    int_at_least,
     lock_run_dir,
     one_line_warnings,
     positive_int,
@@ -58,7 +59,11 @@ def run_args(parser: argparse.ArgumentParser, updates: int | None, eval_every: i
     g.add_argument("--eval-episodes", type=positive_int, default=10,
                    help="episodes per evaluation per seed (default %(default)s)")
     g.add_argument("--batch-size", type=positive_int, default=256)
-    g.add_argument("--checkpoint-every", type=int, default=0, help="updates between checkpoints (0: every evaluation)")
+    g.add_argument("--checkpoint-every", type=int_at_least(0), default=0,
+                   help="updates between checkpoints (0: every evaluation)")
+    g.add_argument("--keep-checkpoints", type=int_at_least(0), default=0,
+                   help="besides the last and the best, keep the N newest periodic checkpoints as "
+                        "checkpoints/<variant>.<update>.msgpack (default 0)")
     g.add_argument("--dataset-path", default=None, help="a D4RL .hdf5, Minari directory or id, or .npz to use instead")
     g.add_argument("--max-transitions", "--transitions", dest="max_transitions", type=positive_int, default=None,
                    help="train on the first N transitions only (a dataset not cached yet is generated at that size "
@@ -130,7 +135,8 @@ def study_fields(args) -> dict:
     """Study fields from the run flags (a study without --updates / --eval-every sets those itself)."""
     fields = dict(seeds=tuple(range(args.seed_offset, args.seed_offset + args.seeds)),
                   eval_episodes=args.eval_episodes, batch_size=args.batch_size,
-                  checkpoint_every=args.checkpoint_every, max_transitions=args.max_transitions,
+                  checkpoint_every=args.checkpoint_every, keep_checkpoints=args.keep_checkpoints,
+                  max_transitions=args.max_transitions,
                   clip_actions=args.clip_actions)
     return fields | {k: getattr(args, k) for k in ("updates", "eval_every") if hasattr(args, k)}
 
@@ -179,8 +185,8 @@ def _data_key(study: Study) -> tuple:
 _UNSET = object()
 RESUME_FLAGS = frozenset({"resume", "updates", "parallel", "no_progress", "clip_actions", "logger"})
 # run flag destination -> the Study field it sets (seeds and --dataset-path are mapped in `replay`)
-RUN_FIELDS = ("updates", "eval_every", "eval_episodes", "batch_size", "checkpoint_every", "max_transitions",
-              "clip_actions")
+RUN_FIELDS = ("updates", "eval_every", "eval_episodes", "batch_size", "checkpoint_every", "keep_checkpoints",
+              "max_transitions", "clip_actions")
 REPLAY_FLAGS = frozenset({"config", "out", "overwrite", "parallel", "no_progress", "logger", "seeds", "seed_offset",
                           "dataset_path", *RUN_FIELDS})
 

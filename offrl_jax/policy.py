@@ -27,7 +27,7 @@ from flax import serialization
 
 from offrl_jax.algos import make_algorithm, make_config
 from offrl_jax.envs import get_env_spec
-from offrl_jax.resume import checkpoint_path, shape_mismatch
+from offrl_jax.resume import checkpoint_path, kept_updates, shape_mismatch
 from offrl_jax.study import Study
 
 
@@ -70,12 +70,13 @@ def load_exported(path: str | Path) -> Callable[[np.ndarray], np.ndarray]:
 
 
 def load_policy(run_dir: str | Path, variant: str | None = None, seed: int | None = None,
-                checkpoint: str = "last") -> Policy:
+                checkpoint: str | int = "last") -> Policy:
     """The deterministic policy of `variant` (default: the run's first) and `seed` (default: its first) from the
-    run saved in `run_dir`: its last checkpoint, or with checkpoint="best" the one taken at the variant's best
-    seed-mean evaluation.  Raises ValueError (one line) for a run, variant or seed that is not there."""
-    if checkpoint not in ("last", "best"):
-        raise ValueError(f"checkpoint must be 'last' or 'best', not {checkpoint!r}")
+    run saved in `run_dir`: its last checkpoint, with checkpoint="best" the one taken at the variant's best
+    seed-mean evaluation, or with an update number one kept by `keep_checkpoints`.  Raises ValueError (one line)
+    for a run, variant, seed or checkpoint that is not there."""
+    if checkpoint not in ("last", "best") and (isinstance(checkpoint, bool) or not isinstance(checkpoint, int)):
+        raise ValueError(f"checkpoint must be 'last', 'best' or an update number, not {checkpoint!r}")
     run_dir = Path(run_dir)
     try:
         raw = json.loads((run_dir / "config.json").read_text())
@@ -95,11 +96,13 @@ def load_policy(run_dir: str | Path, variant: str | None = None, seed: int | Non
         raise ValueError(f"{run_dir}: no seed {seed}; the run has seeds {', '.join(map(str, study.seeds))}")
     groups = study.groups()
     group = next(g for g, _ in groups if variant in [v.label for v in g])
-    path = checkpoint_path(run_dir, group if checkpoint == "last" else tuple(v for v in group if v.label == variant),
+    path = checkpoint_path(run_dir, group if checkpoint != "best" else tuple(v for v in group if v.label == variant),
                            checkpoint)
     if not path.is_file():
+        kept = kept_updates(run_dir, group)
+        hint = f"; kept updates: {', '.join(map(str, kept))}" if kept and isinstance(checkpoint, int) else ""
         raise ValueError(f"{path}: no checkpoint of '{variant}' (the run had not reached its first checkpoint, or "
-                         "its checkpoints were not kept)")
+                         f"its checkpoints were not kept){hint}")
     try:
         payload = serialization.msgpack_restore(path.read_bytes())
         payload["states"], payload["update"]

@@ -62,7 +62,7 @@ def merge_runs(run_dirs: list[Path], out_dir: Path) -> list[dict]:
         if not (d / "config.json").exists() or not (d / "curves.csv").exists():
             raise FileNotFoundError(f"{d}: not a run directory (config.json and curves.csv expected)")
         studies.append(Study.from_json((d / "config.json").read_text()))
-    own = ("variants", "reference", "checkpoint_every")
+    own = ("variants", "reference", "checkpoint_every", "keep_checkpoints")
     shared = [{k: v for k, v in dataclasses.asdict(s).items() if k not in own} for s in studies]
     for d, fields in zip(run_dirs[1:], shared[1:]):
         if differ := [k for k in fields if fields[k] != shared[0][k]]:

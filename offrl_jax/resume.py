@@ -35,12 +35,21 @@ class ResumeMismatch(ValueError):
     """The files of a run directory do not belong together; nothing was changed."""
 
 
-def checkpoint_path(out_dir: Path, group: tuple[Variant, ...], which: str = "last") -> Path:
+def checkpoint_path(out_dir: Path, group: tuple[Variant, ...], which: str | int = "last") -> Path:
     """checkpoints/<labels>.msgpack: a group's last complete chunk (what --resume continues); with which="best",
-    checkpoints/<label>.best.msgpack: one variant's seeds at its best seed-mean evaluation so far."""
+    checkpoints/<label>.best.msgpack: one variant's seeds at its best seed-mean evaluation so far; with an update
+    number, checkpoints/<labels>.<update>.msgpack: a group's checkpoint kept from that update (`keep_checkpoints`)."""
     if which == "best":
         return out_dir / "checkpoints" / f"{group[0].label}.best.msgpack"
-    return out_dir / "checkpoints" / f"{'+'.join(v.label for v in group)}.msgpack"
+    labels = "+".join(v.label for v in group)
+    return out_dir / "checkpoints" / (f"{labels}.msgpack" if which == "last" else f"{labels}.{int(which)}.msgpack")
+
+
+def kept_updates(out_dir: Path, group: tuple[Variant, ...]) -> list[int]:
+    """The updates of a group's kept periodic checkpoints, oldest first."""
+    prefix = "+".join(v.label for v in group) + "."
+    found = (p.name[len(prefix):-len(".msgpack")] for p in (out_dir / "checkpoints").glob(f"{prefix}*.msgpack"))
+    return sorted(int(u) for u in found if u.isdigit())
 
 
 def group_identity(study: Study, group: tuple[Variant, ...], data_sha256: str) -> dict[str, Any]:

@@ -19,7 +19,14 @@ from pathlib import Path
 
 import numpy as np
 
-from offrl_jax.cli import OneLineParser, check_writable_file, one_line_warnings, positive_int, print_error
+from offrl_jax.cli import (
+    OneLineParser,
+    check_writable_file,
+    int_at_least,
+    one_line_warnings,
+    positive_int,
+    print_error,
+)
 
 
 def rollout(policy, episodes: int, video: Path | None = None, max_frames: int | None = None) -> np.ndarray:
@@ -50,13 +57,18 @@ def rollout(policy, episodes: int, video: Path | None = None, max_frames: int | 
     return np.asarray(returns)
 
 
+def _which(text: str) -> str | int:
+    return text if text in ("last", "best") else int_at_least(0)(text)
+
+
 def main(argv: list[str] | None = None) -> int:
     p = OneLineParser(prog="python -m offrl_jax.rollout", description=__doc__.split("\n\n")[0])
     p.add_argument("run", type=Path, help="a run directory (its config.json and checkpoints/)")
     p.add_argument("--variant", default=None, help="variant label (default: the run's first)")
     p.add_argument("--seed", type=int, default=None, help="which trained seed (default: the run's first)")
-    p.add_argument("--checkpoint", choices=("last", "best"), default="last",
-                   help="the variant's last checkpoint, or the one at its best seed-mean evaluation")
+    p.add_argument("--checkpoint", type=_which, default="last",
+                   help="last (default), best (the one at the variant's best seed-mean evaluation), or an update "
+                        "number (a checkpoint kept by --keep-checkpoints)")
     p.add_argument("--episodes", type=positive_int, default=3, help="episodes to roll out (default %(default)s)")
     p.add_argument("--video", type=Path, default=None, help="write the episodes as a video (.mp4 or .gif)")
     p.add_argument("--max-frames", type=positive_int, default=None, help="stop recording after this many frames")

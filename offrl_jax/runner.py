@@ -11,13 +11,16 @@ Output directory:
     summary.json     one object per variant (see `summarize`)
     curves.png       mean and 95 % CI per variant against updates, pre-training end marked
     checkpoints/     <variant>.msgpack, the last complete chunk of every variant (of every sweep group:
-                     <label>+<label>...), and <variant>.best.msgpack, its seeds at its best seed-mean evaluation;
-                     with the observation statistics and the env, for `offrl_jax.policy.load_policy`
+                     <label>+<label>...), <variant>.best.msgpack, its seeds at its best seed-mean evaluation, and
+                     with `keep_checkpoints` = N the N newest of <variant>.<update>.msgpack; each with the
+                     observation statistics and the env, for `offrl_jax.policy.load_policy`
 """
 from __future__ import annotations
 
 import json
 import math
+import os
+import shutil
 import sys
 import threading
 import time
@@ -36,7 +39,7 @@ from offrl_jax.evaluate import evaluate_normalized, make_policy
 from offrl_jax.loggers import make_logger
 from offrl_jax.provenance import fingerprint
 from offrl_jax.results import plot_curves, pretrain_ends_of, summarize, summary_json, write_curves
-from offrl_jax.resume import check_resume, checkpoint_path, group_identity
+from offrl_jax.resume import check_resume, checkpoint_path, group_identity, kept_updates
 from offrl_jax.study import Study, Variant
 from offrl_jax.workers import run_in_processes
 
@@ -239,6 +242,8 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
         if chunk.update - last_saved >= every or chunk.update == last_update:
             save_checkpoint(ckpt_path, chunk.states, chunk.update, chunk.seconds, rows, meta)
             last_saved = chunk.update
+            if study.keep_checkpoints:
+                _keep(out_dir, group, chunk.update, study.keep_checkpoints)
         for j, variant in enumerate(group):  # each variant's best evaluation so far (its seed mean) is kept too
             mine = slice(j * len(seeds), (j + 1) * len(seeds))
             if alive[mine].any() and np.nanmean(scores[mine]) > best.get(variant.label, -math.inf):
@@ -251,6 +256,19 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
     if any(p.auto_stop for p in phases):  # where pre-training actually ended
         return max(pretrain_ends_of(rows).values(), default=pretrain_end)
     return pretrain_end
+
+
+def _keep(out_dir: Path, group: tuple[Variant, ...], update: int, keep: int) -> None:
+    """The last checkpoint, just written at `update`, is kept under its update too (a hard link: no copy; the next
+    save replaces the last one by a rename, so the link keeps this one); only the `keep` newest kept ones remain."""
+    last, kept = checkpoint_path(out_dir, group), checkpoint_path(out_dir, group, update)
+    kept.unlink(missing_ok=True)
+    try:
+        os.link(last, kept)
+    except OSError:  # a file system without hard links
+        shutil.copyfile(last, kept)
+    for old in kept_updates(out_dir, group)[:-keep]:
+        checkpoint_path(out_dir, group, old).unlink(missing_ok=True)
 
 
 def _best_scores(rows: list[dict]) -> dict[str, float]:

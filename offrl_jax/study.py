@@ -40,6 +40,8 @@ class Study:
     eval_episodes: int = 10
     batch_size: int = 256
     checkpoint_every: int = 0  # 0 = at every evaluation
+    keep_checkpoints: int = 0  # besides the last and the best, keep the N newest periodic checkpoints
+    # (checkpoints/<labels>.<update>.msgpack; 0: none)
     max_transitions: int | None = None  # train on the first N transitions only (quick runs, tests); never cached
     clip_actions: bool = False  # clip out-of-bounds dataset actions (with a warning) instead of refusing the data
     reference: str | None = None  # label of the from-scratch variant whose final score is the asymptote (None: no
@@ -56,8 +58,10 @@ class Study:
             raise ValueError("Study.seeds must not be empty")
         if not all(isinstance(s, int) and not isinstance(s, bool) and 0 <= s < 2**31 for s in self.seeds):
             raise ValueError(f"Study.seeds = {self.seeds!r} must be integers in [0, 2**31)")
-        if self.checkpoint_every < 0:
-            raise ValueError(f"Study.checkpoint_every = {self.checkpoint_every} must be >= 0")
+        for name in ("checkpoint_every", "keep_checkpoints"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                raise ValueError(f"Study.{name} = {value!r} must be an integer >= 0")
         labels = [v.label for v in self.variants]
         if not labels or len(set(labels)) != len(labels):
             raise ValueError(f"Study.variants need unique labels, got {labels}")

@@ -23,7 +23,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def run(tmp_path_factory):
     out = tmp_path_factory.mktemp("policy") / "run"
     study = Study(name="t", dataset="synthetic", env="hopper", seeds=(0, 1), updates=400, eval_every=100,
-                  eval_episodes=2, batch_size=32,
+                  eval_episodes=2, batch_size=32, keep_checkpoints=2,
                   variants=(Variant.of("scratch", "td3bc", pretrain="none", hidden=(32, 32)),
                             Variant.of("edac", "edac", pretrain="none", hidden=(32, 32), num_critics=2)))
     run_study(study, out, synthetic_dataset(), progress=False)
@@ -59,6 +59,21 @@ def test_the_best_checkpoint_is_the_best_evaluation(run):
     payload = serialization.msgpack_restore((run / "checkpoints" / "scratch.best.msgpack").read_bytes())
     assert payload["best_score"] == pytest.approx(np.mean(means[best_update]))
     assert payload["members"] == [["scratch", 0], ["scratch", 1]]
+
+
+def test_keep_n_keeps_the_newest_periodic_checkpoints(run):
+    from offrl_jax.envs import normalized_score
+
+    kept = sorted(p.name for p in (run / "checkpoints").glob("*.*00.msgpack"))
+    assert kept == ["edac.300.msgpack", "edac.400.msgpack", "scratch.300.msgpack", "scratch.400.msgpack"]
+    policy = load_policy(run, "scratch", seed=1, checkpoint=300)
+    assert policy.update == 300
+    rows = [r for r in csv.DictReader((run / "curves.csv").open())
+            if r["variant"] == "scratch" and int(r["seed"]) == 1 and int(r["update"]) == 300]
+    score = float(np.mean(normalized_score("hopper", rollout(policy, episodes=2))))
+    assert score == pytest.approx(float(rows[0]["score"]), abs=1e-3)
+    with pytest.raises(ValueError, match="kept updates: 300, 400"):
+        load_policy(run, "scratch", checkpoint=100)
 
 
 def test_one_observation_or_a_batch(run):
