@@ -26,6 +26,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
 from offrl_jax.algos.common import Phase, with_hparams
 from offrl_jax.data.dataset import Dataset, normalize_obs
 from offrl_jax.data.returns import returns_to_go
+from offrl_jax.distributed import check_members, to_host
 
 DATA_FIELDS = ("observations", "actions", "rewards", "next_observations", "terminals", "timeouts", "returns")
 
@@ -159,6 +160,7 @@ class Driver:
         self.algo, self.seeds, self.batch_size, self.sweep = algo, tuple(seeds), batch_size, sweep
         values = tuple(sweep[1]) if sweep else (None,)
         self.members = tuple(s for _ in values for s in self.seeds)  # value-major: member j * S + i
+        check_members(len(self.members))
         self.seed_axis, self.replicated = seed_sharding(len(self.members), devices)
         if getattr(algo.cfg, "timeouts", "bootstrap") == "drop":  # CORL's loader: time-out rows are never sampled
             data = data | {"rows": jnp.asarray(np.flatnonzero(np.asarray(data["timeouts"]) == 0), jnp.int32)}
@@ -171,7 +173,7 @@ class Driver:
         self._chunk_fns: dict[tuple[str, int], Callable] = {}
 
     def init(self) -> Any:
-        states = jax.jit(jax.vmap(self.algo.init))(seed_keys(self.members, INIT, 0))
+        states = jax.jit(jax.vmap(self.algo.init), out_shardings=self.seed_axis)(seed_keys(self.members, INIT, 0))
         # Targets start equal to params; give every leaf its own buffer so the chunk function can donate them.
         states = jax.tree.map(lambda x: jnp.array(x, copy=True), states)
         return self.shard(states)
@@ -232,7 +234,7 @@ class Driver:
                 tic = time.perf_counter()
                 states, metrics = self._chunk_fn(phase, calls, phase_for)(states, self.data, self.run_keys,
                                                                           jnp.int32(update), *extra)
-                metrics = jax.tree.map(np.asarray, metrics)
+                metrics = to_host(metrics)  # every member's, on every process
                 elapsed = time.perf_counter() - tic
                 seconds += elapsed
                 update += calls * phase.updates_per_call

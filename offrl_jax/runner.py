@@ -31,6 +31,7 @@ import jax
 import numpy as np
 from tqdm.auto import tqdm
 
+from offrl_jax import distributed
 from offrl_jax.algos import make_algorithm, make_config
 from offrl_jax.checkpoint import atomic_write_text, load_checkpoint, save_checkpoint
 from offrl_jax.data.dataset import Dataset
@@ -65,19 +66,25 @@ def run_study(study: Study, out_dir: Path, dataset: Dataset, resume: bool = Fals
     data_sha256 = data_sha256 or fingerprint(dataset)  # given by a caller that has it (~0.3 s per 1M rows)
     if resume:  # before anything is written: the checkpoints must belong to this study and this data
         check_resume(study, out_dir, dataset, data_sha256)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    writer = distributed.is_writer()  # with several processes (offrl_jax.distributed) only process 0 writes files
+    if distributed.processes() > 1:
+        parallel, progress = 1, progress and writer  # every process runs the groups in the same order
     config_path = out_dir / "config.json"  # a resumed multi-study run may not have begun this study yet
     previous = config_path.read_text() if resume and config_path.exists() else None
     record = study.record_json(dataset, previous, data_sha256)
-    if logger is not None:  # a logger that cannot start (no wandb login, ...) is a warning: the run goes on
+    if writer:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    if logger is not None and writer:  # a logger that cannot start (no wandb login, ...) is a warning: the run goes on
         try:
             logger = make_logger(logger, out_dir, study, json.loads(record), resume)
         except ValueError as e:
             print(f"warning: {e}; the run goes on without it (curves.csv is the record)", file=sys.stderr)
             logger = None
-    atomic_write_text(config_path, record)
+    if writer:
+        atomic_write_text(config_path, record)
     bar = _Progress(len(study.variants) * study.updates, progress)
-    recorder = _Recorder(out_dir / "curves.csv", [v.label for v in study.variants], logger)
+    recorder = _Recorder(out_dir / "curves.csv" if writer else None, [v.label for v in study.variants],
+                         logger if writer else None)
     pretrain_ends: dict[str, int] = {}
     groups = study.groups()
 
@@ -112,8 +119,9 @@ def run_study(study: Study, out_dir: Path, dataset: Dataset, resume: bool = Fals
                 print(f"warning: closing the logger failed ({type(e).__name__}: {e})", file=sys.stderr)
     history = recorder.all_rows()
     summary = summarize(study, history, pretrain_ends)
-    atomic_write_text(out_dir / "summary.json", summary_json(summary))
-    plot_curves(out_dir / "curves.png", study, history, pretrain_ends)
+    if writer:
+        atomic_write_text(out_dir / "summary.json", summary_json(summary))
+        plot_curves(out_dir / "curves.png", study, history, pretrain_ends)
     return summary
 
 
@@ -148,16 +156,17 @@ class _Progress:
 
 class _Recorder:
     """Rows of every variant (in study order), written to curves.csv after each evaluation (and handed to the
-    `logger`, if any); thread-safe."""
+    `logger`, if any; with `path` None, only kept); thread-safe."""
 
-    def __init__(self, path: Path, labels: list[str], logger=None):
+    def __init__(self, path: Path | None, labels: list[str], logger=None):
         self.path, self.rows, self.logger = path, {label: [] for label in labels}, logger
         self.lock, self.stop = threading.Lock(), threading.Event()
 
     def set(self, rows_by_label: dict[str, list[dict]]) -> None:
         with self.lock:
             self.rows.update({label: list(rows) for label, rows in rows_by_label.items()})
-            write_curves(self.path, self.all_rows())
+            if self.path is not None:
+                write_curves(self.path, self.all_rows())
             if self.logger is not None:
                 try:
                     self.logger.log([row for rows in rows_by_label.values() for row in rows])
@@ -190,6 +199,7 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
             "members": [[v.label, seed] for v in group for seed in seeds],
             "obs_mean": np.asarray(obs_mean, np.float32), "obs_std": np.asarray(obs_std, np.float32)}
     states, start, seconds, rows = None, 0, 0.0, []
+    writer = distributed.is_writer()
 
     def record():
         recorder.set({label: [r for r in rows if r["variant"] == label] for label in labels})
@@ -227,7 +237,8 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
                                                              f"{ckpt_path}" if ckpt_path.exists() else
                                                              "no checkpoint had been written"))
         tic = time.perf_counter()
-        scores = evaluate_normalized(policy, chunk.states, study.env, study.eval_episodes).mean(axis=1)
+        host_states, scores = distributed.evaluate_shared(
+            chunk.states, lambda s: evaluate_normalized(policy, s, study.env, study.eval_episodes).mean(axis=1))
         scores[~alive] = np.nan
         rows += _rows(member_names, chunk, scores)
         if chunk.ended:  # a pre-training phase ended itself here: the hand-over, recorded for the summary and resume
@@ -240,16 +251,19 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
                             f"{mean_score:.1f} | eval {time.perf_counter() - tic:.1f}s")
         # checkpoints go on after a partial divergence: on resume the diverged seeds' NaN scores keep them out
         if chunk.update - last_saved >= every or chunk.update == last_update:
-            save_checkpoint(ckpt_path, chunk.states, chunk.update, chunk.seconds, rows, meta)
+            if writer:
+                save_checkpoint(ckpt_path, host_states, chunk.update, chunk.seconds, rows, meta)
+                if study.keep_checkpoints:
+                    _keep(out_dir, group, chunk.update, study.keep_checkpoints)
             last_saved = chunk.update
-            if study.keep_checkpoints:
-                _keep(out_dir, group, chunk.update, study.keep_checkpoints)
         for j, variant in enumerate(group):  # each variant's best evaluation so far (its seed mean) is kept too
             mine = slice(j * len(seeds), (j + 1) * len(seeds))
             if alive[mine].any() and np.nanmean(scores[mine]) > best.get(variant.label, -math.inf):
                 best[variant.label] = float(np.nanmean(scores[mine]))
+                if not writer:
+                    continue
                 save_checkpoint(checkpoint_path(out_dir, (variant,), "best"),
-                                jax.tree.map(lambda x, m=mine: x[m], chunk.states), chunk.update, chunk.seconds,
+                                jax.tree.map(lambda x, m=mine: x[m], host_states), chunk.update, chunk.seconds,
                                 [r for r in rows if r["variant"] == variant.label],
                                 meta | {"members": meta["members"][mine], "best_score": best[variant.label]})
         record()
