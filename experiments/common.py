@@ -86,6 +86,14 @@ def run_args(parser: argparse.ArgumentParser, updates: int | None, eval_every: i
                         "threads; 1 = one after another")
     g.add_argument("--no-progress", action="store_true",
                    help="no progress bar: one plain line per evaluation instead (for batch logs)")
+    m = parser.add_argument_group("many processes or hosts (jax.distributed; offrl_jax/distributed.py)")
+    m.add_argument("--distributed", action="store_true",
+                   help="one run over every process JAX finds in the cluster's environment (SLURM, a TPU slice, "
+                        "Open MPI); needs --out or --resume")
+    m.add_argument("--coordinator", default=None, metavar="HOST:PORT",
+                   help="or set the processes by hand: process 0's address, with --num-processes and --process-id")
+    m.add_argument("--num-processes", type=positive_int, default=None)
+    m.add_argument("--process-id", type=int_at_least(0), default=None)
     g.add_argument("--logger", choices=LOGGERS, default=None,
                    help="also send every evaluation's scores and metrics to TensorBoard (RUN/tensorboard/) or "
                         "Weights & Biases; curves.csv stays the record (pip install -e \".[tensorboard]\" or "
@@ -183,12 +191,13 @@ def _data_key(study: Study) -> tuple:
 
 
 _UNSET = object()
-RESUME_FLAGS = frozenset({"resume", "updates", "parallel", "no_progress", "clip_actions", "logger"})
+PROCESS_FLAGS = frozenset({"distributed", "coordinator", "num_processes", "process_id"})
+RESUME_FLAGS = frozenset({"resume", "updates", "parallel", "no_progress", "clip_actions", "logger", *PROCESS_FLAGS})
 # run flag destination -> the Study field it sets (seeds and --dataset-path are mapped in `replay`)
 RUN_FIELDS = ("updates", "eval_every", "eval_episodes", "batch_size", "checkpoint_every", "keep_checkpoints",
               "max_transitions", "clip_actions")
 REPLAY_FLAGS = frozenset({"config", "out", "overwrite", "parallel", "no_progress", "logger", "seeds", "seed_offset",
-                          "dataset_path", *RUN_FIELDS})
+                          "dataset_path", *RUN_FIELDS, *PROCESS_FLAGS})
 
 
 def given_dests(parser: argparse.ArgumentParser, argv=None) -> set[str]:
@@ -232,6 +241,30 @@ def replay(saved: Study | list[Study], args, given: set[str], hparams: dict) -> 
     return [one(s) for s in saved] if isinstance(saved, list) else one(saved)
 
 
+def start_processes(args) -> bool:
+    """Join the other processes of a multi-process run if the flags ask for one; returns whether this process
+    writes the run's files (process 0, or the only one)."""
+    manual = (args.coordinator, args.num_processes, args.process_id)
+    if not args.distributed and all(x is None for x in manual):
+        return True
+    if args.distributed and any(x is not None for x in manual):
+        raise UsageError("--distributed reads the cluster's environment; --coordinator/--num-processes/--process-id "
+                         "set the processes by hand: give one or the other")
+    if not args.distributed and any(x is None for x in manual):
+        raise UsageError("--coordinator, --num-processes and --process-id go together")
+    if not args.distributed and args.process_id >= args.num_processes:
+        raise UsageError(f"--process-id {args.process_id} must be below --num-processes {args.num_processes}")
+    if args.out is None and args.resume is None:
+        raise UsageError("a multi-process run needs --out (or --resume): every process must name the same directory")
+    from offrl_jax import distributed
+
+    try:
+        distributed.initialize(*manual) if not args.distributed else distributed.initialize()
+    except (RuntimeError, ValueError) as e:
+        raise UsageError(f"jax.distributed could not start ({' '.join(str(e).split())[:300]})") from None
+    return distributed.is_writer()
+
+
 def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parser: argparse.ArgumentParser,
                argv=None, hparams: Callable[[argparse.Namespace], dict] | None = None,
                hparam_dests: frozenset[str] = frozenset()) -> int:
@@ -271,9 +304,13 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
             built = replay(saved_studies(path.parent, path), args, given, typed)
         elif args.resume is None:
             built = build(args)  # validates every hyper-parameter and budget
-        out, replace = output_dir(args, parser.prog.split(".")[-1])
-        check_writable_dir(out)  # before any data is loaded or generated
-        lock = lock_run_dir(out)  # held until the end: one writer per run directory
+        writer = start_processes(args)
+        if writer:
+            out, replace = output_dir(args, parser.prog.split(".")[-1])
+            check_writable_dir(out)  # before any data is loaded or generated
+            lock = lock_run_dir(out)  # held until the end: one writer per run directory
+        else:  # another process of this run writes (and checks) the directory
+            out = args.resume or args.out
         if args.resume is not None:
             built = saved_studies(out)
             if "updates" in given:
@@ -294,20 +331,23 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
                 study_out = out / study.name if isinstance(built, list) else out
                 if (study_out / "checkpoints").is_dir():
                     check_resume(study, study_out, ds, sha)
-            if "updates" in given and isinstance(built, list):
+            if "updates" in given and isinstance(built, list) and writer:
                 atomic_write_text(out / "config.json", studies_json(built))
         if replace:
             shutil.rmtree(out)
-        if isinstance(built, list) and args.resume is None:
+        if isinstance(built, list) and args.resume is None and writer:
             out.mkdir(parents=True, exist_ok=True)  # the whole studies, so --resume can start those not begun yet
             atomic_write_text(out / "config.json", studies_json(built))
         for study, ds, sha in zip(studies, data, shas):
             study_out = out / study.name if isinstance(built, list) else out
-            print(f"{study.name}: {len(ds):,} transitions of {study.dataset}; writing to {study_out}", file=sys.stderr)
+            if writer:
+                print(f"{study.name}: {len(ds):,} transitions of {study.dataset}; writing to {study_out}",
+                      file=sys.stderr)
             summary = run_study(study, study_out, ds, resume=args.resume is not None, progress=not args.no_progress,
                                 parallel=args.parallel, logger=args.logger, data_sha256=sha)
-            print_table(summary)
-            print(f"results: {study_out}/summary.json, curves.csv, curves.png", file=sys.stderr)
+            if writer:
+                print_table(summary)
+                print(f"results: {study_out}/summary.json, curves.csv, curves.png", file=sys.stderr)
     except (UsageError, DatasetError, ValueError, OSError, Diverged) as e:
         if os.environ.get("OFFRL_JAX_DEBUG") == "1":  # the traceback, for whoever is debugging the code
             raise
@@ -318,7 +358,7 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
         print(f"interrupted{where}", file=sys.stderr)
         return 130
     finally:  # a claimed timestamped directory that got nothing (the data failed to load) is not left behind,
-        # nor its runs/<study>/ when that is empty then
+        # nor its runs/<study>/ when that is empty then (a multi-process run always has --out or --resume)
         if out is not None and args.resume is None and args.out is None and out.is_dir() and not any(out.iterdir()):
             out.rmdir()
         if lock is not None:

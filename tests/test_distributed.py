@@ -1,5 +1,6 @@
 """A run spread over 2 local CPU processes (`jax.distributed`, gloo collectives, a localhost coordinator) equals the
-same run in one process: same curves to float tolerance, one set of files written by process 0, and `--resume`."""
+same run in one process: same curves to float tolerance, one set of files written by process 0, and `--resume`
+(here extending the run) by two processes again."""
 from __future__ import annotations
 
 import csv
@@ -10,26 +11,15 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
+
+from .conftest import synthetic_dataset
 
 ROOT = Path(__file__).resolve().parents[1]
 
-SCRIPT = r"""
-import sys
-from pathlib import Path
-out, n, pid, port, updates = Path(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3]), sys.argv[4], int(sys.argv[5])
-from offrl_jax import distributed
-if n > 1:
-    distributed.initialize(f"localhost:{port}", n, pid)
-sys.path.insert(0, "tests")
-from conftest import synthetic_dataset
-from offrl_jax.runner import run_study
-from offrl_jax.study import Study, Variant
-study = Study(name="d", dataset="synthetic", env="hopper", seeds=(0, 1, 2, 3), updates=updates, eval_every=100,
-              eval_episodes=1, batch_size=32, variants=(
-                  Variant.of("pretrained", "td3bc", pretrain="actor+critic", pretrain_updates=100, hidden=(16, 16)),))
-run_study(study, out, synthetic_dataset(), resume=(out / "checkpoints").is_dir(), progress=False)
-"""
+TINY = ["--pretrain", "actor+critic", "--pretrain-updates", "100", "--eval-every", "100", "--eval-episodes", "1",
+        "--seeds", "4", "--hidden", "16", "16", "--batch-size", "32", "--no-progress"]
 
 
 def free_port() -> int:
@@ -38,12 +28,15 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-def launch(out: Path, processes: int, updates: int) -> None:
+def launch(processes: int, *args) -> None:
+    """`python -m experiments.mujoco_medium *args` in `processes` local processes joined by jax.distributed."""
     env = dict(os.environ, JAX_PLATFORMS="cpu")
-    port = free_port()
-    procs = [subprocess.Popen([sys.executable, "-c", SCRIPT, str(out), str(processes), str(i), str(port),
-                               str(updates)], cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                              text=True) for i in range(processes)]
+    port, command = free_port(), [sys.executable, "-m", "experiments.mujoco_medium", *map(str, args)]
+    procs = [subprocess.Popen(command + ([] if processes == 1 else ["--coordinator", f"localhost:{port}",
+                                                                    "--num-processes", str(processes),
+                                                                    "--process-id", str(i)]),
+                              cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+             for i in range(processes)]
     outputs = [p.communicate(timeout=600)[0] for p in procs]
     assert all(p.returncode == 0 for p in procs), "\n".join(o[-3000:] for o in outputs)
 
@@ -55,9 +48,12 @@ def rows(run: Path) -> dict[tuple, dict]:
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
     base = tmp_path_factory.mktemp("distributed")
-    launch(base / "one", 1, 300)
-    launch(base / "two", 2, 200)  # then resumed to 300 by two processes again
-    launch(base / "two", 2, 300)
+    data = synthetic_dataset(2000)
+    path = base / "tiny-hopper.npz"
+    np.savez(path, **{k: getattr(data, k) for k in ("observations", "actions", "rewards", "terminals", "timeouts")})
+    launch(1, "--dataset-path", path, "--updates", 300, "--out", base / "one", *TINY)
+    launch(2, "--dataset-path", path, "--updates", 200, "--out", base / "two", *TINY)
+    launch(2, "--resume", base / "two", "--updates", 300)  # extended by two processes again
     return base / "one", base / "two"
 
 
