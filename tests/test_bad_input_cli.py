@@ -3,6 +3,7 @@
 (missing file, NaN, out-of-bounds actions and unknown names are in test_datasets_cli.py; invalid hyper-parameters
 and unknown env/algorithm names through the experiment CLI in test_experiments.py.)
 """
+import numpy as np
 import pytest
 
 from tests.test_datasets_cli import assert_cli_error, run_cli
@@ -31,6 +32,31 @@ def corrupt(tmp_path):
     return path, "not a readable HDF5 file"
 
 
+def non_binary_terminals(tmp_path):
+    arrays = d4rl_arrays()
+    arrays["terminals"] = arrays["terminals"].astype(np.float32)
+    arrays["terminals"][3] = 2.0  # once silently read as a terminal
+    return write_h5(tmp_path / "hopper-x.hdf5", arrays), "terminals must be 0 or 1"
+
+
+def nan_timeouts(tmp_path):
+    arrays = d4rl_arrays()
+    arrays["timeouts"] = arrays["timeouts"].astype(np.float32)
+    arrays["timeouts"][3] = np.nan
+    return write_h5(tmp_path / "hopper-x.hdf5", arrays), "timeouts must be 0 or 1"
+
+
+def two_dimensional_timeouts(tmp_path):
+    arrays = d4rl_arrays()
+    arrays["timeouts"] = np.stack([arrays["timeouts"]] * 2, axis=1)
+    return write_npz_d4rl(tmp_path / "hopper-x.npz", arrays), "timeouts has shape (40, 2)"
+
+
+def write_npz_d4rl(path, arrays):
+    np.savez(path, **arrays)
+    return path
+
+
 def zero_length_episode(tmp_path):
     return write_npz(tmp_path / "door.npz", lengths=(10, 0, 20)), "length 0"
 
@@ -48,8 +74,9 @@ def minari_without_metadata(tmp_path):
     return tmp_path / "minari-ds", "metadata"
 
 
-@pytest.mark.parametrize("make", [missing_key, different_lengths, empty, corrupt, zero_length_episode,
-                                  garbage_npz, minari_without_metadata])
+@pytest.mark.parametrize("make", [missing_key, different_lengths, empty, corrupt, non_binary_terminals, nan_timeouts,
+                                  two_dimensional_timeouts, zero_length_episode, garbage_npz,
+                                  minari_without_metadata])
 def test_cli_rejects_with_one_line(tmp_path, make):
     path, fragment = make(tmp_path)
     assert_cli_error(run_cli("info", path), str(path), fragment)

@@ -387,4 +387,4 @@ def test_zero_byte_npz_names_the_file(tmp_path):
     path.write_bytes(b"")
     with pytest.raises(DatasetError) as err:
         read_door_npz(path)
-    assert_one_line(err, path, "not a readable .npz file")
+    assert_one_line(err, path, "not a .npz file")

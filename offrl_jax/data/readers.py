@@ -79,7 +79,7 @@ def validate(ds: Dataset, path, env: str | None = None, clip_actions: bool = Fal
     """Check a freshly read dataset and return it with float32 arrays (actions clipped if asked).
 
     Checks: equal lengths, non-empty, 2-D observations/actions, finite observations/actions/rewards/
-    next_observations, obs/act dims against `ENVS[env]` and actions in [-1, 1] (both only when `env` is known).
+    next_observations, terminals and timeouts exactly 0 or 1, obs/act dims against `ENVS[env]` and actions in [-1, 1] (both only when `env` is known).
     """
     arrays = {f: np.asarray(getattr(ds, f)) for f in
               ("observations", "actions", "rewards", "next_observations", "terminals", "timeouts")}
@@ -96,8 +96,11 @@ def validate(ds: Dataset, path, env: str | None = None, clip_actions: bool = Fal
         bad = int(np.count_nonzero(~np.isfinite(out[name])))
         if bad:
             raise DatasetError(f"{path}: {name} contains {bad} non-finite values (NaN or inf)")
-    out["terminals"] = (out["terminals"] != 0).astype(np.float32)
-    out["timeouts"] = (out["timeouts"] != 0).astype(np.float32)
+    for name in ("terminals", "timeouts"):  # flags: exactly 0 or 1 (a NaN or a 2 is a broken file, not a flag)
+        bad = ~np.isin(out[name], (0.0, 1.0))
+        if bad.any():
+            raise DatasetError(f"{path}: {name} must be 0 or 1, but {int(bad.sum())} values are not (e.g. "
+                               f"{float(out[name][bad][0])})")
     ds = Dataset(**out, env=env, name=ds.name, source=ds.source)
     if env is not None:
         _check_env(path, ds, env)
@@ -159,7 +162,13 @@ def d4rl_arrays_to_dataset(path: Path, data: dict, env: str | None = None, clip_
     for key in D4RL_REQUIRED:
         if key not in data:
             raise DatasetError(f"{path}: missing key '{key}' (found: {', '.join(sorted(data)) or 'none'})")
-    if env is None and np.ndim(data["observations"]) == 2 and np.ndim(data["actions"]) == 2:
+    for key in ("rewards", "terminals", "timeouts"):  # shapes and kinds first: episode ends are computed below
+        if key in data:
+            data[key] = _as_float32(path, key, data[key], 1)
+    for key in ("observations", "actions", "next_observations"):
+        if key in data:
+            data[key] = _as_float32(path, key, data[key], 2)
+    if env is None:
         env = infer_env(data["observations"].shape[1], data["actions"].shape[1], hints=(path.stem,))
     if "timeouts" not in data:
         data["timeouts"] = infer_timeouts(path, np.ravel(data["terminals"]), env)
