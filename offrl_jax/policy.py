@@ -77,6 +77,10 @@ def load_policy(run_dir: str | Path, variant: str | None = None, seed: int | Non
     for a run, variant, seed or checkpoint that is not there."""
     if checkpoint not in ("last", "best") and (isinstance(checkpoint, bool) or not isinstance(checkpoint, int)):
         raise ValueError(f"checkpoint must be 'last', 'best' or an update number, not {checkpoint!r}")
+    if isinstance(checkpoint, int) and checkpoint < 0:
+        raise ValueError(f"checkpoint = {checkpoint} must be an update number >= 0 (or 'last', 'best')")
+    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int)):
+        raise ValueError(f"seed must be an integer (one of the run's seeds), not {seed!r}")
     run_dir = Path(run_dir)
     try:
         raw = json.loads((run_dir / "config.json").read_text())

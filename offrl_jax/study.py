@@ -23,6 +23,17 @@ class Variant:
     algo: str
     overrides: tuple[tuple[str, Any], ...] = ()  # config overrides as (name, value) pairs
 
+    def __post_init__(self):
+        if not isinstance(self.label, str) or not self.label.strip():
+            raise ValueError(f"Variant.label = {self.label!r} must be a non-empty string (it names files)")
+        try:  # as from_json gives them back: (name, value) tuples, a list value as a tuple (hashable, comparable)
+            pairs = tuple((name, tuple(x) if isinstance(x, list) else x) for name, x in self.overrides)
+        except (TypeError, ValueError):
+            pairs = None
+        if pairs is None or not all(isinstance(name, str) for name, _ in pairs):
+            raise ValueError(f"Variant.overrides = {self.overrides!r} must be (name, value) pairs")
+        object.__setattr__(self, "overrides", pairs)
+
     @staticmethod
     def of(label: str, algo: str, **overrides: Any) -> Variant:
         return Variant(label, algo, tuple(sorted(overrides.items())))
@@ -50,18 +61,42 @@ class Study:
     vmap_sweeps: bool = True  # variants differing only in one sweepable value (e.g. alpha) share one vmapped program
 
     def __post_init__(self):
+        for name in ("variants", "seeds", "final_window"):  # JSON's lists, stored as tuples (hashable, comparable)
+            if isinstance(getattr(self, name), list):
+                object.__setattr__(self, name, tuple(getattr(self, name)))
+        for name in ("name", "dataset", "env"):
+            if not isinstance(getattr(self, name), str):
+                raise ValueError(f"Study.{name} = {getattr(self, name)!r} must be a string")
+        for name in ("clip_actions", "vmap_sweeps"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"Study.{name} = {getattr(self, name)!r} must be True or False")
         for name in ("updates", "eval_every", "eval_episodes", "batch_size"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or not 0 < value < 2**31:
                 raise ValueError(f"Study.{name} = {value!r} must be a positive integer below 2**31")
+        if not isinstance(self.seeds, tuple):
+            raise ValueError(f"Study.seeds = {self.seeds!r} must be a tuple of integers")
         if not self.seeds:
             raise ValueError("Study.seeds must not be empty")
         if not all(isinstance(s, int) and not isinstance(s, bool) and 0 <= s < 2**31 for s in self.seeds):
             raise ValueError(f"Study.seeds = {self.seeds!r} must be integers in [0, 2**31)")
+        if len(set(self.seeds)) != len(self.seeds):
+            raise ValueError(f"Study.seeds = {self.seeds!r} must be distinct (a repeated seed is the same run twice)")
+        if self.max_transitions is not None and (isinstance(self.max_transitions, bool) or
+                                                 not isinstance(self.max_transitions, int) or self.max_transitions < 1):
+            raise ValueError(f"Study.max_transitions = {self.max_transitions!r} must be a positive integer or None")
+        window = self.final_window
+        if window is not None and not (isinstance(window, tuple) and len(window) == 2 and all(
+                isinstance(x, int) and not isinstance(x, bool) and x >= 0 for x in window) and window[0] <= window[1]):
+            raise ValueError(f"Study.final_window = {window!r} must be two integers lo <= hi, both >= 0 (or None)")
+        if self.reference is not None and not isinstance(self.reference, str):
+            raise ValueError(f"Study.reference = {self.reference!r} must be a variant label or None")
         for name in ("checkpoint_every", "keep_checkpoints"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 0:
                 raise ValueError(f"Study.{name} = {value!r} must be an integer >= 0")
+        if not isinstance(self.variants, tuple) or not all(isinstance(v, Variant) for v in self.variants):
+            raise ValueError(f"Study.variants = {self.variants!r:.200} must be a tuple of Variant")
         labels = [v.label for v in self.variants]
         if not labels or len(set(labels)) != len(labels):
             raise ValueError(f"Study.variants need unique labels, got {labels}")

@@ -1,7 +1,12 @@
 """The Python API's config constructors reject invalid hyper-parameters with one line naming the field."""
+import dataclasses
+import json
+import math
+
 import pytest
 
-from offrl_jax.algos import make_config
+from offrl_jax.algos import ALGOS, make_config
+from offrl_jax.policy import load_policy
 from offrl_jax.study import Study, Variant
 
 
@@ -24,11 +29,61 @@ from offrl_jax.study import Study, Variant
     ("edac", {"entropy_batch": 0}, "entropy_batch = 0 must be >= 1"),
     ("bc", {"pretrain": "actor+critic"}, "pretrain = 'actor+critic' has no effect on the BC baseline"),
     ("bc", {"pretrain_auto": True}, "pretrain_auto = True has no effect on the BC baseline"),
+    # types, checked against each field's annotation before its value
+    ("td3bc", {"alpha": True}, "TD3BCConfig.alpha = True must be a number"),
+    ("td3bc", {"alpha": "2.5"}, "TD3BCConfig.alpha = '2.5' must be a number"),
+    ("td3bc", {"alpha": 10**400}, "0000 must be a finite number"),
+    ("td3bc", {"hidden": (16.5,)}, "TD3BCConfig.hidden = (16.5,) must be a tuple of integers"),
+    ("td3bc", {"hidden": 16}, "TD3BCConfig.hidden = 16 must be a tuple of integers"),
+    ("td3bc", {"hidden": (True, 8)}, "TD3BCConfig.hidden = (True, 8) must be a tuple of integers"),
+    ("td3bc", {"hidden": (0, 8)}, "TD3BCConfig.hidden = (0, 8) must be positive layer widths"),
+    ("td3bc", {"actor_hidden": "256"}, "TD3BCConfig.actor_hidden = '256' must be a tuple of integers or None"),
+    ("td3bc", {"policy_delay": 2.0}, "TD3BCConfig.policy_delay = 2.0 must be an integer"),
+    ("td3bc", {"policy_delay": True}, "TD3BCConfig.policy_delay = True must be an integer"),
+    ("edac", {"num_critics": 10.0}, "EDACConfig.num_critics = 10.0 must be an integer"),
+    ("td3bc", {"actor_layer_norm": 1}, "TD3BCConfig.actor_layer_norm = 1 must be True or False"),
+    ("edac", {"backup_entropy": "no"}, "EDACConfig.backup_entropy = 'no' must be True or False"),
+    ("td3bc", {"init": 3}, "TD3BCConfig.init = 3 must be a string"),
+    ("td3bc", {"lambda_mode": "both"}, "TD3BCConfig.lambda_mode = 'both' must be 'loss' or 'target'"),
+    ("td3bc", {"pretrain": ["actor"]}, "TD3BCConfig.pretrain = ['actor'] must be one of none, actor"),
+    ("edac", {"hidden_bias": "0.1"}, "EDACConfig.hidden_bias = '0.1' must be a number or None"),
+    ("edac", {"log_std_bounds": (-5.0,)}, "EDACConfig.log_std_bounds = (-5.0,) must be a tuple of 2 finite numbers"),
+    ("edac", {"log_std_bounds": (-math.inf, 2.0)}, "EDACConfig.log_std_bounds = (-inf, 2.0) must be a tuple of 2"),
+    ("edac", {"log_std_bounds": ("a", 2.0)}, "EDACConfig.log_std_bounds = ('a', 2.0) must be a tuple of 2"),
 ])
 def test_config_rejects(algo, overrides, message):
     with pytest.raises(ValueError) as err:
         make_config(algo, "hopper", **overrides)
     assert message in str(err.value) and "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize("env", ["ant", "hopper-medium", "Hopper", 3])
+def test_config_rejects_an_unknown_env(env):
+    with pytest.raises(ValueError) as err:
+        make_config("td3bc", env, "x")
+    assert f"unknown env {env!r}; valid: hopper, halfcheetah" in str(err.value) and "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize("algo", sorted(ALGOS))
+@pytest.mark.parametrize("env", ["", "hopper", "halfcheetah", "walker2d", "pen", "door", "hammer", "relocate"])
+def test_every_default_config_passes_its_type_checks(algo, env):
+    for preset in (None, "authors"):
+        make_config(algo, env, f"{env}-cloned", preset=preset)
+
+
+@pytest.mark.parametrize("algo, overrides, stored", [
+    ("edac", {"hidden": [8, 8], "log_std_bounds": [-20, 2], "eta": 1, "hidden_bias": 0},
+     {"hidden": (8, 8), "log_std_bounds": (-20.0, 2.0), "eta": 1.0, "hidden_bias": 0.0}),
+    ("td3bc", {"alpha": 10, "actor_hidden": [16, 16, 16], "policy_delay": 3},
+     {"alpha": 10.0, "actor_hidden": (16, 16, 16), "policy_delay": 3}),
+])
+def test_config_takes_json_forms_and_stores_the_declared_types(algo, overrides, stored):
+    config = make_config(algo, "hopper", **overrides)
+    for name, value in stored.items():
+        assert getattr(config, name) == value and type(getattr(config, name)) is type(value)
+    # a resolved config written to config.json and read back is the same config
+    replayed = make_config(algo, "hopper", **json.loads(json.dumps(dataclasses.asdict(config))))
+    assert replayed == config and hash(replayed) == hash(config)
 
 
 @pytest.mark.parametrize("fields, message", [
@@ -43,9 +98,62 @@ def test_config_rejects(algo, overrides, message):
     ({"updates": 100.5}, "Study.updates = 100.5 must be a positive integer"),
     ({"env": "cartpole"}, "unknown env 'cartpole'; valid: hopper"),
     ({"variants": (Variant.of("a", "td3bc"), Variant.of("a", "td3bc"))}, "unique labels"),
+    ({"seeds": (0, 0)}, "Study.seeds = (0, 0) must be distinct"),
+    ({"seeds": [1, 2, 1]}, "Study.seeds = (1, 2, 1) must be distinct"),
+    ({"seeds": 3}, "Study.seeds = 3 must be a tuple of integers"),
+    ({"seeds": (True,)}, "Study.seeds = (True,) must be integers"),
+    ({"final_window": (5,)}, "Study.final_window = (5,) must be two integers lo <= hi"),
+    ({"final_window": (300, 100)}, "Study.final_window = (300, 100) must be two integers lo <= hi"),
+    ({"final_window": (-1, 100)}, "Study.final_window = (-1, 100) must be two integers lo <= hi, both >= 0"),
+    ({"final_window": (0.5, 100)}, "Study.final_window = (0.5, 100) must be two integers"),
+    ({"final_window": 100}, "Study.final_window = 100 must be two integers"),
+    ({"max_transitions": 0}, "Study.max_transitions = 0 must be a positive integer or None"),
+    ({"max_transitions": 2.5}, "Study.max_transitions = 2.5 must be a positive integer or None"),
+    ({"max_transitions": True}, "Study.max_transitions = True must be a positive integer or None"),
+    ({"clip_actions": "no"}, "Study.clip_actions = 'no' must be True or False"),
+    ({"vmap_sweeps": 1}, "Study.vmap_sweeps = 1 must be True or False"),
+    ({"env": None}, "Study.env = None must be a string"),
+    ({"reference": 0}, "Study.reference = 0 must be a variant label or None"),
+    ({"variants": ("td3bc",)}, "Study.variants = ('td3bc',) must be a tuple of Variant"),
+    ({"variants": (Variant.of("a", "td3bc", alpha=True),)}, "TD3BCConfig.alpha = True must be a number"),
 ])
 def test_study_rejects(fields, message):
     base = dict(name="s", dataset="hopper-medium", env="hopper", variants=(Variant.of("a", "td3bc"),))
     with pytest.raises(ValueError, match=None) as err:
         Study(**(base | fields))
-    assert message in str(err.value)
+    assert message in str(err.value) and "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda: Variant.of("", "td3bc"), "Variant.label = '' must be a non-empty string"),
+    (lambda: Variant.of("  ", "td3bc"), "Variant.label = '  ' must be a non-empty string"),
+    (lambda: Variant(None, "td3bc"), "Variant.label = None must be a non-empty string"),
+    (lambda: Variant("a", "td3bc", (("alpha",),)), "Variant.overrides = (('alpha',),) must be (name, value) pairs"),
+    (lambda: Variant("a", "td3bc", ((1, 2.5),)), "Variant.overrides = ((1, 2.5),) must be (name, value) pairs"),
+])
+def test_variant_rejects(make, message):
+    with pytest.raises(ValueError) as err:
+        make()
+    assert message in str(err.value) and "\n" not in str(err.value)
+
+
+def test_study_stores_json_lists_as_tuples():
+    variants = (Variant.of("a", "td3bc", hidden=(8, 8)), Variant.of("b", "td3bc", hidden=[8, 8], alpha=2))
+    study = Study(name="s", dataset="hopper-medium", env="hopper", variants=list(variants), seeds=[0, 1],
+                  final_window=[100, 300], updates=20_000)
+    assert study.variants == variants and study.seeds == (0, 1) and study.final_window == (100, 300)
+    assert study.variants[1].overrides == (("alpha", 2), ("hidden", (8, 8)))
+    assert Study.from_json(study.to_json()) == study and hash(Study.from_json(study.to_json())) == hash(study)
+
+
+@pytest.mark.parametrize("kw, message", [
+    ({"seed": "0"}, "seed must be an integer (one of the run's seeds), not '0'"),
+    ({"seed": 0.0}, "seed must be an integer (one of the run's seeds), not 0.0"),
+    ({"seed": True}, "seed must be an integer (one of the run's seeds), not True"),
+    ({"checkpoint": -1}, "checkpoint = -1 must be an update number >= 0"),
+    ({"checkpoint": "-1"}, "checkpoint must be 'last', 'best' or an update number, not '-1'"),
+])
+def test_load_policy_rejects_arguments(tmp_path, kw, message):
+    with pytest.raises(ValueError) as err:
+        load_policy(tmp_path, **kw)  # refused before the run directory is read
+    assert message in str(err.value) and "\n" not in str(err.value)

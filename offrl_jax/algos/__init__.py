@@ -15,6 +15,7 @@ from typing import Any
 from offrl_jax.algos.common import Phase
 from offrl_jax.algos.edac import EDAC, EDACConfig
 from offrl_jax.algos.td3bc import TD3BC, TD3BCConfig
+from offrl_jax.envs import ENVS
 
 ALGOS: dict[str, tuple[type, dict[str, Any]]] = {
     "bc": (TD3BCConfig, {"bc_only": True, "pretrain": "actor"}),
@@ -103,9 +104,11 @@ def env_defaults(algo: str, env: str, dataset: str = "") -> dict[str, Any]:
 
 def make_config(algo: str, env: str = "", dataset: str = "", preset: str | None = None, **overrides: Any):
     """Config for `algo` with registry settings, then per-env defaults, then `preset`'s values, then `overrides`
-    (None values ignored)."""
-    if algo not in ALGOS:
-        raise ValueError(f"unknown algorithm '{algo}'; valid: {', '.join(ALGOS)}")
+    (None values ignored).  `env` is a short name ("hopper"), or "" for no env (no per-env defaults)."""
+    if not isinstance(algo, str) or algo not in ALGOS:
+        raise ValueError(f"unknown algorithm {algo!r}; valid: {', '.join(ALGOS)}")
+    if not isinstance(env, str) or (env and env not in ENVS):
+        raise ValueError(f"unknown env {env!r}; valid: {', '.join(ENVS)}")
     config_cls, fixed = ALGOS[algo]
     fields = {f.name for f in dataclasses.fields(config_cls)}
     values = fixed | env_defaults(algo, env, dataset) | preset_values(preset, algo)

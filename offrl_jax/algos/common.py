@@ -25,6 +25,9 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
+import numbers
+import types
+import typing
 from collections.abc import Callable
 from typing import Any
 
@@ -155,8 +158,65 @@ def split_budget(total: int, pretrain: int) -> tuple[int, int]:
     return pretrain, total - pretrain
 
 
+def _typed(annotation: Any, value: Any) -> tuple[bool, Any, str]:
+    """(value fits `annotation`, the value as the field stores it, what the field must be).  JSON's forms are
+    accepted and converted: a list for a tuple, an integer for a float; so are numpy's scalars."""
+    origin, args = typing.get_origin(annotation), typing.get_args(annotation)
+    if origin in (typing.Union, types.UnionType):  # X | None
+        if value is None and type(None) in args:
+            return True, None, ""
+        inner = [a for a in args if a is not type(None)]
+        if len(inner) != 1:
+            return True, value, ""
+        ok, value, need = _typed(inner[0], value)
+        return ok, value, need + (" or None" if type(None) in args else "")
+    if annotation is bool:
+        return isinstance(value, (bool, np.bool_)), bool(value) if isinstance(value, np.bool_) else value, \
+            "must be True or False"
+    if annotation is int:
+        ok = isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_))
+        return ok, int(value) if ok else value, "must be an integer"
+    if annotation is float:
+        ok = isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
+        try:
+            return ok, float(value) if ok else value, "must be a number"
+        except OverflowError:  # an integer too large for a float
+            return False, value, "must be a finite number"
+    if annotation is str:
+        return isinstance(value, str), value, "must be a string"
+    if origin is typing.Literal:
+        need = f"must be {args[0]!r} or {args[1]!r}" if len(args) == 2 else f"must be one of {', '.join(args)}"
+        return isinstance(value, str) and value in args, value, need
+    if origin is tuple:
+        element = args[0]
+        need = (f"must be a tuple of {'integers' if element is int else 'numbers'}" if args[1:] == (...,) else
+                f"must be a tuple of {len(args)} {'integers' if element is int else 'finite numbers'}")
+        if not isinstance(value, (tuple, list)) or (args[1:] != (...,) and len(value) != len(args)):
+            return False, value, need
+        items = [_typed(element, x) for x in value]
+        ok = all(fits for fits, _, _ in items) and all(
+            math.isfinite(x) for _, x, _ in items if element is float and isinstance(x, float))
+        return ok, tuple(x for _, x, _ in items) if ok else value, need
+    return True, value, ""  # an annotation this check does not know: the config's own checks decide
+
+
+def check_types(cfg) -> None:
+    """Check every field of a config dataclass against its annotation, before the value checks, and store JSON's
+    forms as the annotation says (see `_typed`), so a config read back from config.json equals the one written."""
+    hints = typing.get_type_hints(type(cfg))
+    for field in dataclasses.fields(cfg):
+        value = getattr(cfg, field.name)
+        ok, typed, need = _typed(hints[field.name], value)
+        if not ok:
+            raise ValueError(f"{type(cfg).__name__}.{field.name} = {value!r} {need}")
+        if typed is not value:
+            object.__setattr__(cfg, field.name, typed)  # frozen dataclass
+
+
 def validate_common(cfg) -> None:
-    """Reject invalid hyper-parameters with one line naming the field (shared by every config)."""
+    """Reject invalid hyper-parameters with one line naming the field (shared by every config): the types first
+    (`check_types`), then the values."""
+    check_types(cfg)
     for field in dataclasses.fields(cfg):
         value = getattr(cfg, field.name)
         if isinstance(value, float) and not math.isfinite(value):
