@@ -277,32 +277,43 @@ def markdown(records: list[dict[str, Any]]) -> str:
 def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     p = OneLineParser(prog="python -m benchmarks.throughput", description=__doc__.split("\n\n")[0],
                       formatter_class=argparse.RawTextHelpFormatter)
-    p.add_argument("--algo", nargs="*", help="only these registry names (default: all)")
-    p.add_argument("--seeds", nargs="*", type=positive_int, default=[1, 2, 4, 8],
+    p.add_argument("--algo", nargs="+", choices=sorted({c.algo for c in CASES}), metavar="ALGO",
+                   help="only these registry names: %(choices)s (default: all)")
+    p.add_argument("--seeds", nargs="+", type=positive_int, default=None,
                    help="vmapped seed counts (default 1 2 4 8)")
-    p.add_argument("--phase", nargs="*", help="only these phase labels (e.g. offline_rl)")
-    p.add_argument("--num-critics", nargs="*", type=positive_int, help="only cases with these ensemble sizes")
+    p.add_argument("--phase", nargs="+", choices=sorted({c.phase for c in CASES}), metavar="PHASE",
+                   help="only these phase labels: %(choices)s (default: all)")
+    p.add_argument("--num-critics", nargs="+", type=positive_int, help="only cases with these ensemble sizes")
     p.add_argument("--json", action="store_true", help="one JSON object per case on stdout")
-    p.add_argument("--quick", action="store_true", help="one tiny case (BC, S=1, 10k rows): a smoke test")
+    p.add_argument("--quick", action="store_true", help="one tiny case (BC, S=1, at most 10k rows, 2 short timed "
+                   "chunks): a smoke test; takes none of the case-selection and timing flags")
     p.add_argument("--transitions", type=positive_int, default=100_000, help="rows of the synthetic dataset")
-    p.add_argument("--target-s", type=number(0, low_open=True), default=0.25, help="aimed-for seconds per timed chunk")
-    p.add_argument("--reps", type=positive_int, default=3,
-                   help="timed chunks per case after a warm-up (median reported)")
+    p.add_argument("--target-s", type=number(0, low_open=True), default=None,
+                   help="aimed-for seconds per timed chunk (default 0.25)")
+    p.add_argument("--reps", type=positive_int, default=None,
+                   help="timed chunks per case after a warm-up, median reported (default 3)")
     p.add_argument("--heavy-s", type=number(0, low_open=True), default=1.5,
                    help="chunks longer than this (one call per seed) are timed once without warm-up")
     p.add_argument("--markdown", metavar="FILE", help="print a markdown table of a results .jsonl file and exit")
     p.add_argument("--out", help="also write JSON lines to results/benchmarks/OUT.jsonl (or OUT if it is a path)")
     args = p.parse_args(argv)
-    if args.seeds == []:
-        p.error("--seeds needs at least one seed count")
 
-    if args.markdown:
+    if args.markdown is not None:  # an input: the results file to render
+        source = Path(args.markdown)
+        if source.is_dir():
+            p.error(f"{source} is a directory; --markdown reads a results .jsonl file")
         try:
-            lines = [json.loads(line) for line in Path(args.markdown).read_text().splitlines() if line.strip()]
+            raw = source.read_bytes()
+        except FileNotFoundError:
+            p.error(f"{source}: no such file (--markdown reads a results .jsonl file)")
+        except OSError as e:
+            p.error(f"{source}: cannot be read ({e.strerror or e})")
+        try:
+            lines = [json.loads(line) for line in raw.decode().splitlines() if line.strip()]
             if not all(isinstance(line, dict) for line in lines):
                 raise ValueError("not one JSON object per line")
-        except (OSError, ValueError) as e:
-            p.error(f"{args.markdown}: not a results file of this benchmark ({e})")
+        except ValueError as e:
+            p.error(f"{source}: not a results file of this benchmark ({e})")
         if lines and "meta" in lines[0]:
             m = lines.pop(0)["meta"]
             print(f"`{m['command']}` — {m['date']}, {m['machine']}, load average at start {m['load_avg']}, "
@@ -313,15 +324,25 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
             p.error(f"{args.markdown}: not a results file of this benchmark (missing {e})")
         return lines
     if args.quick:
+        fixed = [flag for flag, value in (("--algo", args.algo), ("--phase", args.phase), ("--seeds", args.seeds),
+                                          ("--num-critics", args.num_critics), ("--target-s", args.target_s),
+                                          ("--reps", args.reps)) if value is not None]
+        if fixed:
+            p.error(f"--quick runs one fixed case (BC, S=1, 2 short timed chunks), so it takes no {', '.join(fixed)}; "
+                    "drop --quick to choose the cases and timing")
         cases, seed_counts = [QUICK_CASE], [1]
         args.transitions, args.target_s, args.reps = min(args.transitions, 10_000), 0.1, 2
     else:
         cases = [c for c in CASES if (not args.algo or c.algo in args.algo)
                  and (not args.phase or c.phase in args.phase)
                  and (not args.num_critics or c.config.num_critics in args.num_critics)]
-        seed_counts = args.seeds
+        seed_counts = args.seeds or [1, 2, 4, 8]
+        args.target_s = 0.25 if args.target_s is None else args.target_s
+        args.reps = 3 if args.reps is None else args.reps
         if not cases:
-            p.error(f"no case for --algo {args.algo} --phase {args.phase} --num-critics {args.num_critics}")
+            chosen = [f"{flag} {' '.join(map(str, v))}" for flag, v in
+                      (("--algo", args.algo), ("--phase", args.phase), ("--num-critics", args.num_critics)) if v]
+            p.error(f"no case matches {' '.join(chosen)} (the cases: {', '.join(c.label for c in CASES)})")
     out_path = None
     if args.out:
         out_path = Path(args.out)

@@ -23,6 +23,7 @@ from offrl_jax.checkpoint import atomic_write_text
 from offrl_jax.cli import check_writable_dir, int_at_least, seed_int
 from offrl_jax.envs import ENVS, make_env
 
+OUTPUTS = ("scores.json", "table.txt")  # what --out gets (--overwrite replaces only these)
 PAPER_TABLE4 = {"pen": -162.09, "door": -84.52, "hammer": -856.83, "relocate": -37.95}
 
 
@@ -54,7 +55,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", type=Path, default=None)
     ap.add_argument("--overwrite", action="store_true", help="replace the files of an earlier run in --out")
     args = ap.parse_args(argv)
-    refuse_existing(ap, args.out, args.overwrite)
+    refuse_existing(ap, args.out, args.overwrite, OUTPUTS)
     if args.out is not None:
         try:
             check_writable_dir(args.out)

@@ -132,10 +132,21 @@ def output_dir(args, study_name: str) -> tuple[Path, bool]:
     return args.out, False
 
 
-def refuse_existing(parser: argparse.ArgumentParser, out: Path | None, overwrite: bool) -> None:
-    """For commands that write a few named files into --out: a non-empty --out without --overwrite is a usage
-    error (one line, exit 2), before any work is done."""
-    if out is not None and out.exists() and (not out.is_dir() or any(out.iterdir())) and not overwrite:
+def refuse_existing(parser: argparse.ArgumentParser, out: Path | None, overwrite: bool, names: tuple[str, ...]) -> None:
+    """For commands that write a few named files (`names`) into --out: an --out that is a file, a directory holding
+    anything else (--overwrite replaces only those files), or a non-empty one without --overwrite is a usage error
+    (one line, exit 2), before any work is done."""
+    if out is None or not out.exists():
+        return
+    if not out.is_dir():
+        parser.error(f"{out} is a file, not a directory")
+    entries = sorted(out.iterdir())
+    others = [p.name for p in entries if p.name not in names or not p.is_file()]
+    if others:
+        listed = ", ".join(others[:3]) + (f" and {len(others) - 3} more" if len(others) > 3 else "")
+        parser.error(f"{out} holds {listed}, which this command does not write; --overwrite replaces only "
+                     f"{', '.join(names)}: choose another --out")
+    if entries and not overwrite:
         parser.error(f"{out} exists and is not empty; pass --overwrite or choose another --out")
 
 

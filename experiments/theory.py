@@ -23,6 +23,8 @@ from experiments.common import OneLineParser, refuse_existing
 from offrl_jax.checkpoint import atomic_write_text
 from offrl_jax.cli import check_writable_dir, int_at_least, number, positive_int, seed_int
 
+OUTPUTS = ("rows.json", "summary.json", "theory.png")  # what --out gets (--overwrite replaces only these)
+
 
 def random_mdp(rng: np.random.Generator, states: int, actions: int) -> tuple[np.ndarray, np.ndarray]:
     """P (S, A, S) with Dirichlet(0.1) rows (sparse-ish dynamics) and rewards R (S, A) ~ U[0, 1]."""
@@ -149,12 +151,12 @@ def main(argv=None) -> int:
     ap.add_argument("--overwrite", action="store_true", help="replace the files of an earlier run in --out")
     ap.add_argument("--json", action="store_true", help="print the summary as JSON")
     args = ap.parse_args(argv)
+    refuse_existing(ap, args.out, args.overwrite, OUTPUTS)
     if args.out is not None:
         try:
             check_writable_dir(args.out)
         except OSError as e:
             ap.error(str(e))
-    refuse_existing(ap, args.out, args.overwrite)
     rows = run(args.mdps, args.states, args.actions, args.gamma, args.eps, args.betas, args.delta, args.seed)
     summary = table(rows)
     if args.out:

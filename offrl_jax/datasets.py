@@ -190,7 +190,8 @@ def _parser() -> argparse.ArgumentParser:
                           "levels); a capped dataset in the cache is reported as such whenever it is loaded")
     gen.add_argument("--out", type=Path, default=None, help="dataset directory (default: the cache, see `list`)")
     gen.add_argument("--seed", type=seed_int, default=0, help="seed of the rollouts (envs and action noise)")
-    gen.add_argument("--overwrite", action="store_true", help="replace a dataset already generated there")
+    gen.add_argument("--overwrite", action="store_true",
+                     help="replace a dataset already generated there (only a directory `generate` wrote)")
     return parser
 
 

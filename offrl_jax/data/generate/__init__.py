@@ -212,6 +212,28 @@ def _remove_stale_scratch(out_dir: Path) -> None:
             continue
 
 
+GENERATED_ENTRIES = ("data", "offrl_jax.json", "bc_policy.msgpack")  # all a dataset directory of `generate` holds
+
+
+def check_replaceable(out: Path) -> None:
+    """Raise FileExistsError (one line) unless the existing `out` is empty or a dataset directory `generate` wrote
+    (`data/metadata.json`, `offrl_jax.json`, nothing else but `bc_policy.msgpack`): overwrite replaces only that."""
+    out = Path(out)
+    if not out.is_dir():
+        raise FileExistsError(f"{out} is a file, not a dataset directory")
+    entries = sorted(p.name for p in out.iterdir())
+    others = [n for n in entries if n not in GENERATED_ENTRIES]
+    if others:
+        listed = ", ".join(others[:3]) + (f" and {len(others) - 3} more" if len(others) > 3 else "")
+        what = f"holds {listed}"
+    elif entries and not ((out / "data" / "metadata.json").is_file() and (out / "offrl_jax.json").is_file()):
+        what = "has no data/metadata.json and offrl_jax.json"
+    else:
+        return
+    raise FileExistsError(f"{out} {what}: not a generated dataset, so --overwrite will not delete it; choose "
+                          "another --out")
+
+
 def generate(name: str, transitions: int | None = None, out_dir: str | Path | None = None, seed: int = 0,
              overwrite: bool = False, progress: bool = True, num_envs: int = 16,
              sac_run: str | Path | None = None) -> Path:
@@ -219,9 +241,12 @@ def generate(name: str, transitions: int | None = None, out_dir: str | Path | No
 
     transitions: cap on the number of rows (default 1M per policy; the replay levels default to the whole run).
     out_dir: the dataset directory (default `dataset_dir(name)`: `cache_dir()/"datasets"/<name>-v0`); an existing
-        one raises unless overwrite.
+        one raises unless overwrite, which replaces only a dataset directory written here (`check_replaceable`).
     seed: env / action-noise seed of the rollouts.  sac_run: SAC run directory for the replay levels.
     """
+    target = Path(out_dir) if out_dir is not None else default_dir(name)
+    if overwrite and target.exists():
+        check_replaceable(target)  # before any work
     if name == "door-cloned":
         from offrl_jax.data.generate.door_cloned import generate_door_cloned
 
@@ -250,6 +275,6 @@ def generate(name: str, transitions: int | None = None, out_dir: str | Path | No
     return out
 
 
-__all__ = ["generate", "build", "write_minari", "collect", "load_policy", "shipped_policies", "parse_name",
-           "default_dir", "sac_run_dir", "DATASET_NAMES", "LEVELS", "GEN_ENVS", "D4RL_V2_STATS",
+__all__ = ["generate", "check_replaceable", "build", "write_minari", "collect", "load_policy", "shipped_policies",
+           "parse_name", "default_dir", "sac_run_dir", "DATASET_NAMES", "LEVELS", "GEN_ENVS", "D4RL_V2_STATS",
            "MEDIUM_TARGET_SCORE"]
