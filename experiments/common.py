@@ -45,6 +45,12 @@ class UsageError(ValueError):
     pass
 
 
+def nonempty(text: str) -> str:
+    if not text.strip():
+        raise argparse.ArgumentTypeError("expected a path or name, got an empty string")
+    return text
+
+
 def run_args(parser: argparse.ArgumentParser, updates: int | None, eval_every: int | None, seeds: int = 3) -> None:
     """The run flags; `updates`/`eval_every` None leaves that flag out (a study that sets it itself)."""
     g = parser.add_argument_group("run")
@@ -64,7 +70,8 @@ def run_args(parser: argparse.ArgumentParser, updates: int | None, eval_every: i
     g.add_argument("--keep-checkpoints", type=int_at_least(0), default=0,
                    help="besides the last and the best, keep the N newest periodic checkpoints as "
                         "checkpoints/<variant>.<update>.msgpack (default 0)")
-    g.add_argument("--dataset-path", default=None, help="a D4RL .hdf5, Minari directory or id, or .npz to use instead")
+    g.add_argument("--dataset-path", type=nonempty, default=None,
+                   help="a D4RL .hdf5, Minari directory or id, or .npz to use instead")
     g.add_argument("--max-transitions", "--transitions", dest="max_transitions", type=positive_int, default=None,
                    help="train on the first N transitions only (a dataset not cached yet is generated at that size "
                         "for this run, and not cached)")
@@ -183,8 +190,11 @@ def saved_studies(out: Path, path: Path | None = None) -> Study | list[Study]:
             print(f"warning: {path} predates saving whole studies; not begun, so not resumed (run them again): "
                   f"{lost}", file=sys.stderr)
         return [Study.from_json((out / name / "config.json").read_text()) for name in begun]
-    except (KeyError, TypeError, AttributeError, json.JSONDecodeError) as e:
-        raise UsageError(f"{path}: not a saved study ({type(e).__name__}: {e})") from None
+    except UsageError:
+        raise
+    except (KeyError, TypeError, AttributeError, ValueError) as e:  # bad JSON, or values a Study refuses
+        kind = "" if type(e) is ValueError else f"{type(e).__name__}: "
+        raise UsageError(f"{path}: not a saved study ({kind}{e})") from None
 
 
 def load_data(study: Study, clip_actions: bool = False):
@@ -306,6 +316,9 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
         if args.config is not None:
             if not args.config.exists():
                 raise UsageError(f"{args.config}: no such file or directory")
+            if args.config.is_dir() and not (args.config / "config.json").is_file():
+                raise UsageError(f"{args.config or '.'}: a directory without a config.json (give a run directory "
+                                 "or its config.json)")
             unknown = given - REPLAY_FLAGS - hparam_dests
             if unknown:
                 raise UsageError(f"--config keeps the saved run's variants, so {_flags(parser, unknown)} cannot be "

@@ -141,6 +141,8 @@ def _one_line_error(module: str, *args: str, cwd=None):
     ("benchmarks.throughput", ["--markdown", "/nonexistent.jsonl"], "/nonexistent.jsonl"),
     ("experiments.report", ["/nonexistent/run"], "/nonexistent/run"),
     ("experiments.mujoco_medium", ["--config", "/nonexistent/config.json"], "/nonexistent/config.json"),
+    ("experiments.mujoco_medium", ["--config", "tests"], "tests: a directory without a config.json"),
+    ("experiments.mujoco_medium", ["--dataset-path", ""], "empty string"),
 ])
 def test_entry_point_refuses_bad_values_in_one_line(module, args, message):
     assert message in _one_line_error(module, *args)

@@ -79,7 +79,8 @@ def validate(ds: Dataset, path, env: str | None = None, clip_actions: bool = Fal
     """Check a freshly read dataset and return it with float32 arrays (actions clipped if asked).
 
     Checks: equal lengths, non-empty, 2-D observations/actions, finite observations/actions/rewards/
-    next_observations, terminals and timeouts exactly 0 or 1, obs/act dims against `ENVS[env]` and actions in [-1, 1] (both only when `env` is known).
+    next_observations, terminals and timeouts exactly 0 or 1, obs/act dims against `ENVS[env]` and actions in
+    [-1, 1] (both only when `env` is known).
     """
     arrays = {f: np.asarray(getattr(ds, f)) for f in
               ("observations", "actions", "rewards", "next_observations", "terminals", "timeouts")}
