@@ -115,8 +115,12 @@ def check_resume(study: Study, out_dir: Path, ds, data_sha256: str) -> None:
         print(f"warning: {curves} cannot be read ({type(e).__name__}); it is written again from the checkpoints",
               file=sys.stderr)
         rows = []
+    if (out_dir / "checkpoints").exists() and not (out_dir / "checkpoints").is_dir():
+        raise ResumeMismatch(f"{out_dir / 'checkpoints'} is not a directory; nothing was changed")
     for group, _ in groups:
         path, labels = checkpoint_path(out_dir, group), {v.label for v in group}
+        if path.exists() and not path.is_file():
+            raise ResumeMismatch(f"{path} is not a checkpoint file; nothing was changed")
         if not path.is_file():
             done = [int(r["update"]) for r in rows if r.get("variant") in labels]
             if done:

@@ -51,7 +51,7 @@ class Diverged(RuntimeError):
 
 def run_study(study: Study, out_dir: Path, dataset: Dataset, resume: bool = False, progress: bool = True,
               parallel: int = 1, processes: bool | None = None, logger: str | None = None,
-              data_sha256: str | None = None) -> list[dict]:
+              data_sha256: str | None = None, verify: bool = True) -> list[dict]:
     """Run (or resume) every variant; write results as it goes; return the summary.
 
     Variants that differ only in one sweepable hyper-parameter (`sweep_groups`) train as one vmapped program unless
@@ -61,10 +61,11 @@ def run_study(study: Study, out_dir: Path, dataset: Dataset, resume: bool = Fals
     `processes=False`, in threads of this process (a jitted chunk releases the GIL).  Results do not depend on
     either (each variant's randomness is its own).  `logger` ("tensorboard" or "wandb") also sends every
     evaluation's scores and metrics there (`offrl_jax.loggers`); curves.csv stays the record.  `data_sha256`: the
-    dataset's `fingerprint`, where the caller has computed it already.
+    dataset's `fingerprint`, where the caller has computed it already; `verify` False skips the resume check for a
+    caller that has just made it (the command line checks every study before the first one starts).
     """
     data_sha256 = data_sha256 or fingerprint(dataset)  # given by a caller that has it (~0.3 s per 1M rows)
-    if resume:  # before anything is written: the checkpoints must belong to this study and this data
+    if resume and verify:  # before anything is written: the checkpoints must belong to this study and this data
         check_resume(study, out_dir, dataset, data_sha256)
     writer = distributed.is_writer()  # with several processes (offrl_jax.distributed) only process 0 writes files
     if distributed.processes() > 1:

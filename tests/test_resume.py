@@ -192,3 +192,21 @@ def test_shape_mismatch_names_the_first_difference():
     assert "expected entries ['b', 'none'] not found" in shape_mismatch(expected, {"a": {"w": np.ones((2, 3))}})
     assert "unexpected entries ['c']" in shape_mismatch(expected, {"a": {"w": np.ones((2, 3))}, "b": np.ones(4),
                                                                    "none": None, "c": 1})
+
+
+@pytest.mark.parametrize("where", ["checkpoints/scratch.msgpack", "checkpoints"])
+def test_a_checkpoint_path_that_is_not_a_file_is_refused_before_anything(half_run, tmp_path, where):
+    run = resumed_copy(half_run, tmp_path)
+    target = run / where
+    if target.is_dir():
+        shutil.rmtree(target)
+    else:
+        target.unlink()
+    if where.endswith(".msgpack"):
+        target.mkdir()
+    else:
+        target.write_text("not a directory")
+    before = {p: p.read_bytes() for p in run.rglob("*") if p.is_file()}
+    with pytest.raises(ResumeMismatch, match="not a (checkpoint file|directory); nothing was changed"):
+        run_study(tiny_study(), run, synthetic_dataset(), resume=True, progress=False)
+    assert {p: p.read_bytes() for p in run.rglob("*") if p.is_file()} == before
