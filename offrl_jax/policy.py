@@ -27,7 +27,7 @@ from flax import serialization
 
 from offrl_jax.algos import make_algorithm, make_config
 from offrl_jax.envs import get_env_spec
-from offrl_jax.resume import checkpoint_path, kept_updates, shape_mismatch
+from offrl_jax.resume import checkpoint_differences, checkpoint_path, kept_updates, shape_mismatch
 from offrl_jax.study import Study
 
 
@@ -115,6 +115,12 @@ def load_policy(run_dir: str | Path, variant: str | None = None, seed: int | Non
     if "obs_mean" not in payload:
         raise ValueError(f"{path}: made before checkpoints stored the observation statistics; train it again "
                          f"(--config {run_dir / 'config.json'}) to act from it")
+    if "identity" in payload:  # the checkpoint must be this run's: its variants, configs, seeds and data
+        records = [r for r in raw.get("runs", []) if isinstance(r, dict)]
+        data_sha256 = ((records[-1].get("dataset") or {}).get("sha256")) if records else None
+        differ = checkpoint_differences(payload, study, group, data_sha256)
+        if differ:
+            raise ValueError(f"{path}: made by another run than {run_dir / 'config.json'} ({'; '.join(differ[:3])})")
     members = [[str(label), int(s)] for label, s in payload.get("members", [])]
     if [variant, seed] not in members:
         raise ValueError(f"{path}: holds no '{variant}' seed {seed} (it holds "

@@ -105,6 +105,15 @@ def shape_mismatch(expected: Any, found: Any, where: str = "") -> str | None:
     return None if shape == tuple(expected.shape) else f"{where}: shape {shape}, expected {tuple(expected.shape)}"
 
 
+def checkpoint_differences(payload: dict, study: Study, group: tuple[Variant, ...],
+                           data_sha256: str | None) -> list[str]:
+    """What differs between a checkpoint's recorded identity and `group` of `study` on the data with this SHA-256
+    (None: the data is not compared)."""
+    saved = json.loads(payload["identity"])
+    defaults = [json.loads(json.dumps(dataclasses.asdict(type(make_config(v.algo))()), default=list)) for v in group]
+    return identity_differences(saved, group_identity(study, group, data_sha256 or saved.get("data")), defaults)
+
+
 def check_resume(study: Study, out_dir: Path, ds, data_sha256: str) -> None:
     """Raise ResumeMismatch if a checkpoint in `out_dir` does not belong to `study` on `ds` (see the module)."""
     groups = study.groups()
@@ -135,10 +144,7 @@ def check_resume(study: Study, out_dir: Path, ds, data_sha256: str) -> None:
             raise ResumeMismatch(f"{path}: not a readable checkpoint ({type(e).__name__}); nothing was changed") \
                 from None
         if "identity" in payload:
-            defaults = [json.loads(json.dumps(dataclasses.asdict(type(make_config(v.algo))()), default=list))
-                        for v in group]
-            differ = identity_differences(json.loads(payload["identity"]),
-                                          group_identity(study, group, data_sha256), defaults)
+            differ = checkpoint_differences(payload, study, group, data_sha256)
             if differ:
                 raise ResumeMismatch(f"{path}: made by another run ({'; '.join(differ[:3])}"
                                      f"{'; ...' if len(differ) > 3 else ''}); nothing was changed")

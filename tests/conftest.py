@@ -1,7 +1,23 @@
-import numpy as np
-import pytest
+"""Shared fixtures.  The suite compiles the same small XLA programs many times, in this process and in the commands
+it starts, so it shares one persistent compilation cache (JAX's own, keyed by program, options and versions):
+compilation is most of a tiny run's time.  $JAX_COMPILATION_CACHE_DIR, if set, is used instead."""
+import os
+import tempfile
 
-from offrl_jax.data.dataset import Dataset
+os.environ.setdefault("JAX_COMPILATION_CACHE_DIR",
+                      os.path.join(tempfile.gettempdir(), f"offrl-jax-test-compile-cache-{os.getuid()}"))
+os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0")
+os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES", "-1")
+
+import jax  # noqa: E402  (after the environment it reads)
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+from offrl_jax.data.dataset import Dataset  # noqa: E402
+
+jax.config.update("jax_compilation_cache_dir", os.environ["JAX_COMPILATION_CACHE_DIR"])
+jax.config.update("jax_persistent_cache_min_compile_time_secs", 0)
+jax.config.update("jax_persistent_cache_min_entry_size_bytes", -1)
 
 
 def synthetic_dataset(transitions: int = 2000, env: str = "hopper", obs_dim: int = 11, act_dim: int = 3,

@@ -132,3 +132,19 @@ def test_rollout_refuses_bad_input_in_one_line(run, tmp_path):
                                 text=True, timeout=300)
         assert result.returncode == 2 and result.stderr.strip().splitlines()[-1].startswith("error:")
         assert message in result.stderr and "Traceback" not in result.stderr
+
+
+@pytest.mark.parametrize("field, value", [("data", "0" * 64), ("seeds", [5, 6])])
+def test_a_checkpoint_of_another_run_is_refused(run, tmp_path, field, value):
+    import json
+    import shutil
+
+    from flax import serialization
+
+    copy = shutil.copytree(run, tmp_path / "copy")
+    path = copy / "checkpoints" / "scratch.msgpack"
+    payload = serialization.msgpack_restore(path.read_bytes())
+    payload["identity"] = json.dumps(json.loads(payload["identity"]) | {field: value})
+    path.write_bytes(serialization.msgpack_serialize(payload))
+    with pytest.raises(ValueError, match="made by another run"):
+        load_policy(copy, "scratch", seed=0)
