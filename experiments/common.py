@@ -51,6 +51,14 @@ def nonempty(text: str) -> str:
     return text
 
 
+def plain_path(text: str) -> Path:
+    """An output path without control characters (a newline in a directory name would split every log line)."""
+    if not text or any(ord(c) < 32 or ord(c) == 127 for c in text):
+        raise argparse.ArgumentTypeError(f"expected a path without control characters (newline, tab, ...), got "
+                                         f"{text!r}")
+    return Path(text)
+
+
 def run_args(parser: argparse.ArgumentParser, updates: int | None, eval_every: int | None, seeds: int = 3) -> None:
     """The run flags; `updates`/`eval_every` None leaves that flag out (a study that sets it itself)."""
     g = parser.add_argument_group("run")
@@ -76,7 +84,7 @@ def run_args(parser: argparse.ArgumentParser, updates: int | None, eval_every: i
                    help="train on the first N transitions only (a dataset not cached yet is generated at that size "
                         "for this run, and not cached)")
     g.add_argument("--clip-actions", action="store_true", help="clip out-of-bounds dataset actions (with a warning)")
-    g.add_argument("--out", type=Path, default=None, help="output directory (default: runs/<study>/<timestamp>)")
+    g.add_argument("--out", type=plain_path, default=None, help="output directory (default: runs/<study>/<timestamp>)")
     g.add_argument("--overwrite", action="store_true",
                    help="replace the earlier run in --out (only a directory whose config.json is a saved study)")
     g.add_argument("--resume", type=Path, default=None,

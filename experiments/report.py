@@ -47,7 +47,8 @@ def read_summary(path: Path) -> list[dict]:
         summary = json.loads(path.read_text())
     except json.JSONDecodeError as e:
         raise ValueError(f"{path}: not valid JSON ({e})") from None
-    if not isinstance(summary, list) or not all(isinstance(s, dict) and "variant" in s for s in summary):
+    if not isinstance(summary, list) or not summary or not all(isinstance(s, dict) and "variant" in s
+                                                               for s in summary):
         raise ValueError(f"{path}: not a run's summary (a list of one object per variant expected)")
     return summary
 

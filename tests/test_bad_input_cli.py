@@ -143,6 +143,7 @@ def _one_line_error(module: str, *args: str, cwd=None):
     ("experiments.mujoco_medium", ["--config", "/nonexistent/config.json"], "/nonexistent/config.json"),
     ("experiments.mujoco_medium", ["--config", "tests"], "tests: a directory without a config.json"),
     ("experiments.mujoco_medium", ["--dataset-path", ""], "empty string"),
+    ("experiments.mujoco_medium", ["--out", "runs/a\tb"], "without control characters"),
 ])
 def test_entry_point_refuses_bad_values_in_one_line(module, args, message):
     assert message in _one_line_error(module, *args)
@@ -183,7 +184,7 @@ def test_entry_point_refuses_an_unwritable_output_before_working(tmp_path, modul
 
 
 def test_report_refuses_a_summary_that_is_not_one(tmp_path):
-    for text in ('{"a": 1}', "[1, 2]", "null", "not json"):
+    for text in ('{"a": 1}', "[1, 2]", "null", "not json", "[]"):
         (tmp_path / "summary.json").write_text(text)
         assert str(tmp_path / "summary.json") in _one_line_error("experiments.report", str(tmp_path))
 
