@@ -32,11 +32,19 @@ def read_curves(path: Path) -> list[dict]:
     (a metric another variant logs) are left out."""
     ints, texts = {"seed", "update"}, {"variant", "algo", "phase"}
     with open(path, newline="") as f:
+        reader = csv.DictReader(f)
+        rows = []
         try:
-            return [{k: v if k in texts else int(v) if k in ints else float(v) for k, v in row.items()
-                     if v not in ("", None) and k is not None} for row in csv.DictReader(f)]
+            for row in reader:
+                if None in row or None in row.values():  # more or fewer cells than the header: cut or edited
+                    cells = sum(v is not None for k, v in row.items() if k is not None) + len(row.get(None, []))
+                    raise ValueError(f"line {reader.line_num} has {cells} cells for "
+                                     f"{len(reader.fieldnames or [])} columns (a truncated or edited file?)")
+                rows.append({k: v if k in texts else int(v) if k in ints else float(v) for k, v in row.items()
+                             if v != ""})
         except (ValueError, TypeError) as e:
             raise ValueError(f"{path}: not a curves.csv of this project ({e})") from None
+    return rows
 
 
 def pretrain_ends_of(rows: list[dict]) -> dict[str, int]:

@@ -208,3 +208,14 @@ def test_merge_runs_resummarises_variants_trained_apart(tmp_path, capsys):
     assert "dataset differ" in capsys.readouterr().err and not (tmp_path / "ac").exists()
     assert report.main(["--merge", str(tmp_path / "bb"), str(b), str(b)]) == 2  # the same variant twice
     assert "unique labels" in capsys.readouterr().err
+
+
+def test_a_truncated_curves_csv_is_refused_not_read_short(tmp_path):
+    from offrl_jax.results import read_curves
+
+    path = tmp_path / "curves.csv"
+    path.write_text("variant,seed,update,score,critic_loss\na,0,100,1.5,2.0\na,0,200,1.7,\nb,0,100,0.4")
+    with pytest.raises(ValueError, match="line 4 has 4 cells for 5 columns"):
+        read_curves(path)
+    path.write_text("variant,seed,update,score,critic_loss\na,0,100,1.5,2.0\na,0,200,1.7,\n")
+    assert [r.get("critic_loss") for r in read_curves(path)] == [2.0, None]  # an empty cell is a metric not logged
