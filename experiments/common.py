@@ -102,6 +102,10 @@ def run_args(parser: argparse.ArgumentParser, updates: int | None, eval_every: i
     g.add_argument("--no-progress", action="store_true",
                    help="no progress bar: one plain line per evaluation instead (for batch logs)")
     m = parser.add_argument_group("many processes or hosts (jax.distributed; offrl_jax/distributed.py)")
+    m.add_argument("--processes", type=positive_int, default=1,
+                   help="split the seeds of every variant over N processes of this machine, each on its share of "
+                        "the cores (one run: process 0 writes it); the seeds (x sweep values) must divide by N "
+                        "(default 1)")
     m.add_argument("--distributed", action="store_true",
                    help="one run over every process JAX finds in the cluster's environment (SLURM, a TPU slice, "
                         "Open MPI); needs --out or --resume")
@@ -220,7 +224,7 @@ def _data_key(study: Study) -> tuple:
 
 
 _UNSET = object()
-PROCESS_FLAGS = frozenset({"distributed", "coordinator", "num_processes", "process_id"})
+PROCESS_FLAGS = frozenset({"processes", "distributed", "coordinator", "num_processes", "process_id"})
 RESUME_FLAGS = frozenset({"resume", "updates", "parallel", "no_progress", "clip_actions", "logger", *PROCESS_FLAGS})
 # run flag destination -> the Study field it sets (seeds and --dataset-path are mapped in `replay`)
 RUN_FIELDS = ("updates", "eval_every", "eval_episodes", "batch_size", "checkpoint_every", "keep_checkpoints",
@@ -274,6 +278,9 @@ def start_processes(args) -> bool:
     """Join the other processes of a multi-process run if the flags ask for one; returns whether this process
     writes the run's files (process 0, or the only one)."""
     manual = (args.coordinator, args.num_processes, args.process_id)
+    if args.processes > 1 and (args.distributed or any(x is not None for x in manual)):
+        raise UsageError("--processes starts its own processes on this machine; --distributed and --coordinator "
+                         "join processes started elsewhere: give one or the other")
     if not args.distributed and all(x is None for x in manual):
         return True
     if args.distributed and any(x is not None for x in manual):
@@ -294,6 +301,20 @@ def start_processes(args) -> bool:
     return distributed.is_writer()
 
 
+def _child_argv(argv, args, out: Path) -> list[str]:
+    """The command line of the other processes of a --processes run: this one's, without --processes, with the
+    output directory this process chose."""
+    argv, kept, skip = list(sys.argv[1:] if argv is None else argv), [], False
+    for token in argv:
+        if skip:
+            skip = False
+        elif token == "--processes":
+            skip = True
+        elif not token.startswith("--processes="):
+            kept.append(token)
+    return kept + (["--out", str(out)] if args.out is None and args.resume is None else [])
+
+
 def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parser: argparse.ArgumentParser,
                argv=None, hparams: Callable[[argparse.Namespace], dict] | None = None,
                hparam_dests: frozenset[str] = frozenset()) -> int:
@@ -303,7 +324,7 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
     they make ({config field: value}, None for a flag not given)."""
     args = parser.parse_args(argv)
     one_line_warnings()
-    out, replace, lock = None, False, None
+    out, replace, lock, local, ok = None, False, None, None, False
     try:
         given = given_dests(parser, argv)
         if args.logger is not None:  # its writer must be there before anything is written
@@ -348,6 +369,17 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
             if "updates" in given:
                 built = extend(built, args.updates)
         studies = built if isinstance(built, list) else [built]
+        if args.processes > 1:  # this process becomes process 0 of a run over N local processes
+            for study in studies:
+                for group, _ in study.groups():
+                    if (len(study.seeds) * len(group)) % args.processes:
+                        raise UsageError(f"--processes {args.processes}: {study.name}'s {len(study.seeds)} seeds "
+                                         f"(x {len(group)} sweep values) do not divide over {args.processes} "
+                                         "processes")
+            from offrl_jax.distributed import LocalProcesses
+
+            local = LocalProcesses(args.processes, parser.prog, _child_argv(argv, args, out))
+            local.start()
         loaded: dict = {}  # bad data fails here, before anything is written; each dataset is loaded once
         for study in studies:
             if _data_key(study) not in loaded:
@@ -380,6 +412,7 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
             if writer:
                 print_table(summary)
                 print(f"results: {study_out}/summary.json, curves.csv, curves.png", file=sys.stderr)
+        ok = True
     except (UsageError, DatasetError, ValueError, OSError, Diverged) as e:
         if os.environ.get("OFFRL_JAX_DEBUG") == "1":  # the traceback, for whoever is debugging the code
             raise
@@ -389,7 +422,9 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
         where = f"; resume with --resume {out}" if out is not None and (out / "config.json").is_file() else ""
         print(f"interrupted{where}", file=sys.stderr)
         return 130
-    finally:  # a claimed timestamped directory that got nothing (the data failed to load) is not left behind,
+    finally:
+        failed = local.close(ok) if local is not None else None  # the other processes of a --processes run
+        # a claimed timestamped directory that got nothing (the data failed to load) is not left behind,
         # nor its runs/<study>/ when that is empty then (a multi-process run always has --out or --resume)
         if out is not None and args.resume is None and args.out is None and out.is_dir() and not any(out.iterdir()):
             out.rmdir()
@@ -402,4 +437,7 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
                     empty.rmdir()  # only if empty
                 except OSError:
                     break
+    if failed is not None:
+        print_error(failed)
+        return 2
     return 0

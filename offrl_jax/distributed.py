@@ -38,6 +38,82 @@ def initialize(coordinator: str | None = None, num_processes: int | None = None,
     jax.distributed.initialize(**kwargs)
 
 
+class LocalProcesses:
+    """One run over `n` processes of this machine: this one is process 0 and starts processes 1..n-1 as copies of
+    the command (`argv`, with the coordinator flags added), each pinned to its share of the cores with
+    single-threaded XLA where that share is one core, as `offrl_jax.workers` does for variants.  Call `start`
+    before JAX's backend starts; `close` waits for the others (or stops them after a failure)."""
+
+    def __init__(self, n: int, module: str, argv: list[str]):
+        self.n, self.module, self.argv, self.procs, self.logs = n, module, list(argv), [], []
+
+    def start(self) -> None:
+        import os
+        import socket
+        import subprocess
+        import sys
+        import tempfile
+        import threading
+
+        from offrl_jax.workers import SINGLE_THREAD_XLA, core_sets
+
+        with socket.socket() as s:
+            s.bind(("localhost", 0))
+            port = s.getsockname()[1]
+        cores = core_sets(self.n)
+        share = [cores[i % len(cores)] for i in range(self.n)]
+        for i in range(1, self.n):
+            env = dict(os.environ)
+            if len(share[i]) == 1:
+                env["XLA_FLAGS"] = f"{SINGLE_THREAD_XLA} {env.get('XLA_FLAGS', '')}".strip()
+            log = tempfile.TemporaryFile("w+")
+            self.logs.append(log)
+            self.procs.append(subprocess.Popen(
+                [sys.executable, "-m", self.module, *self.argv, "--coordinator", f"localhost:{port}",
+                 "--num-processes", str(self.n), "--process-id", str(i)], env=env, stdout=subprocess.DEVNULL,
+                stderr=log, preexec_fn=(lambda c=share[i]: os.sched_setaffinity(0, c))
+                if hasattr(os, "sched_setaffinity") else None))
+        if hasattr(os, "sched_setaffinity"):
+            os.sched_setaffinity(0, share[0])
+        if len(share[0]) == 1:
+            os.environ["XLA_FLAGS"] = f"{SINGLE_THREAD_XLA} {os.environ.get('XLA_FLAGS', '')}".strip()
+        threading.Thread(target=self._watch, daemon=True).start()
+        initialize(f"localhost:{port}", self.n, 0)
+
+    def _failure(self) -> str | None:
+        for i, (proc, log) in enumerate(zip(self.procs, self.logs), 1):
+            if proc.poll() not in (None, 0):
+                log.seek(0)
+                lines = [line for line in log.read().splitlines() if line.strip()]
+                return f"process {i} of this run failed ({lines[-1] if lines else f'exit {proc.returncode}'})"
+        return None
+
+    def _watch(self) -> None:
+        """A process that dies leaves the others waiting in a collective: end the run with its reason."""
+        import os
+        import sys
+        import time
+
+        while any(p.poll() is None for p in self.procs):
+            time.sleep(1.0)
+            if (why := self._failure()) is not None:
+                print(f"error: {why}", file=sys.stderr, flush=True)
+                for p in self.procs:
+                    p.terminate()
+                os._exit(2)
+
+    def close(self, ok: bool) -> str | None:
+        """Wait for the other processes (stop them if this one failed); the reason one of them failed, if any."""
+        for p in self.procs:
+            if not ok:
+                p.terminate()
+            try:
+                p.wait(timeout=60)
+            except Exception:  # noqa: BLE001 -- a process that does not end is stopped
+                p.kill()
+        return self._failure() if ok else None
+
+
 def processes() -> int:
     return jax.process_count()
 

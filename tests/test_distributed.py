@@ -1,6 +1,7 @@
 """A run spread over 2 local CPU processes (`jax.distributed`, gloo collectives, a localhost coordinator) equals the
 same run in one process: same curves to float tolerance, one set of files written by process 0, and `--resume`
-(here extending the run) by two processes again."""
+(here extending the run) by two processes again.  The first two-process part is started as `--processes 2` (the
+command starts its second process itself), the resume by hand (`--coordinator/--num-processes/--process-id`)."""
 from __future__ import annotations
 
 import csv
@@ -52,8 +53,9 @@ def runs(tmp_path_factory):
     path = base / "tiny-hopper.npz"
     np.savez(path, **{k: getattr(data, k) for k in ("observations", "actions", "rewards", "terminals", "timeouts")})
     launch(1, "--dataset-path", path, "--updates", 300, "--out", base / "one", *TINY)
-    launch(2, "--dataset-path", path, "--updates", 200, "--out", base / "two", *TINY)
-    launch(2, "--resume", base / "two", "--updates", 300)  # extended by two processes again
+    launch(1, "--dataset-path", path, "--updates", 200, "--out", base / "two", *TINY, "--processes", 2)  # it starts
+    # the other process itself; then two processes started by hand extend the run
+    launch(2, "--resume", base / "two", "--updates", 300)
     return base / "one", base / "two"
 
 
