@@ -85,7 +85,7 @@ class LocalProcesses:
             if proc.poll() not in (None, 0):
                 log.seek(0)
                 lines = [line for line in log.read().splitlines() if line.strip()]
-                return f"process {i} of this run failed ({lines[-1] if lines else f'exit {proc.returncode}'})"
+                return f"process {i} of this run failed (exit {proc.returncode}{': ' + lines[-1] if lines else ''})"
         return None
 
     def _watch(self) -> None:
@@ -104,6 +104,11 @@ class LocalProcesses:
 
     def close(self, ok: bool) -> str | None:
         """Wait for the other processes (stop them if this one failed); the reason one of them failed, if any."""
+        if ok:  # leave together: each process's exit waits at a shutdown barrier that this one must reach too
+            try:
+                jax.distributed.shutdown()
+            except Exception:  # noqa: BLE001 -- the others are waited for (or stopped) below either way
+                pass
         for p in self.procs:
             if not ok:
                 p.terminate()

@@ -69,7 +69,7 @@ def run_study(study: Study, out_dir: Path, dataset: Dataset, resume: bool = Fals
         check_resume(study, out_dir, dataset, data_sha256)
     writer = distributed.is_writer()  # with several processes (offrl_jax.distributed) only process 0 writes files
     if distributed.processes() > 1:
-        parallel, progress = 1, progress and writer  # every process runs the groups in the same order
+        parallel = 1  # every process runs the groups in the same order
     config_path = out_dir / "config.json"  # a resumed multi-study run may not have begun this study yet
     previous = config_path.read_text() if resume and config_path.exists() else None
     record = study.record_json(dataset, previous, data_sha256)
@@ -83,7 +83,7 @@ def run_study(study: Study, out_dir: Path, dataset: Dataset, resume: bool = Fals
             logger = None
     if writer:
         atomic_write_text(config_path, record)
-    bar = _Progress(len(study.variants) * study.updates, progress)
+    bar = _Progress(len(study.variants) * study.updates, progress, quiet=not writer)
     recorder = _Recorder(out_dir / "curves.csv" if writer else None, [v.label for v in study.variants],
                          logger if writer else None)
     pretrain_ends: dict[str, int] = {}
@@ -132,11 +132,13 @@ class Stopped(RuntimeError):
 
 class _Progress:
     """The progress bar, or with `progress` off one plain line per evaluation (so a batch log shows the run as it
-    goes); `update`, `set_postfix_str`, `write` and `close` as tqdm's."""
+    goes), or with `quiet` nothing (the other processes of a multi-process run); `update`, `set_postfix_str`,
+    `write` and `close` as tqdm's."""
 
-    def __init__(self, total: int, progress: bool):
-        self.bar = tqdm(total=total, disable=not progress, unit="upd", dynamic_ncols=True, file=sys.stderr)
-        self.plain, self.total, self.done, self.tic = not progress, total, 0, time.monotonic()
+    def __init__(self, total: int, progress: bool, quiet: bool = False):
+        self.bar = tqdm(total=total, disable=quiet or not progress, unit="upd", dynamic_ncols=True, file=sys.stderr)
+        self.plain, self.quiet, self.total, self.done = not progress and not quiet, quiet, total, 0
+        self.tic = time.monotonic()
 
     def update(self, n: int) -> None:
         self.bar.update(n)
@@ -149,7 +151,8 @@ class _Progress:
         print(f"[{100 * self.done / self.total:3.0f}% {minutes:3d}:{seconds:02d}] {text}", file=sys.stderr, flush=True)
 
     def write(self, text: str, file=None) -> None:
-        self.bar.write(text, file=sys.stderr)
+        if not self.quiet:
+            self.bar.write(text, file=sys.stderr)
 
     def close(self) -> None:
         self.bar.close()

@@ -169,11 +169,13 @@ def test_a_failing_parallel_variant_stops_the_others_at_once(tmp_path, monkeypat
 def test_commands_writing_into_out_refuse_an_earlier_one(module, tmp_path, capsys):
     import importlib
 
-    (tmp_path / "summary.json").write_text("earlier")
+    command = importlib.import_module(f"experiments.{module}")
+    earlier = tmp_path / command.OUTPUTS[0]  # one of the command's own files, from an earlier run
+    earlier.write_text("earlier")
     with pytest.raises(SystemExit) as e:
-        importlib.import_module(f"experiments.{module}").main(["--out", str(tmp_path)])
+        command.main(["--out", str(tmp_path)])
     assert e.value.code == 2 and "exists and is not empty; pass --overwrite" in capsys.readouterr().err
-    assert (tmp_path / "summary.json").read_text() == "earlier"
+    assert earlier.read_text() == "earlier"
 
 
 def test_random_scores_report_the_installed_reward_too():
