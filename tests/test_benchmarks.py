@@ -108,7 +108,7 @@ def test_device_check_runs_on_a_cpu_with_a_tiny_budget(tmp_path):
 def test_scaling_runs_its_cases_at_a_tiny_size(capsys):
     from benchmarks.scaling import main
 
-    assert main(["--json", "--seeds", "2", "--cases", "1core", "2processes", "--updates", "4", "--chunks", "1"]) == 0
+    assert main(["--json", "--seeds", "2", "--cases", "2processes", "--updates", "4", "--chunks", "1"]) == 0
     rows = [json.loads(line) for line in capsys.readouterr().out.splitlines() if line.strip()]
-    assert [(r["case"], r["seeds"], r["processes"]) for r in rows] == [("1core", 2, 1), ("2processes", 2, 2)]
+    assert [(r["case"], r["seeds"], r["processes"]) for r in rows] == [("2processes", 2, 2)]
     assert all(r["updates_per_s"] > 0 for r in rows)

@@ -58,7 +58,8 @@ def test_edac_soft_pretraining_computes_per_seed_soft_returns(tiny_dataset):
 
 @pytest.mark.parametrize("algo_name, name, values, kw", [
     ("td3bc", "alpha", (1.0, 10.0), dict(pretrain="actor+critic", pretrain_updates=100, hidden=(32, 32))),
-    ("edac", "eta", (0.0, 5.0), dict(pretrain="actor+critic", pretrain_updates=100, num_critics=3, hidden=(32, 32))),
+    pytest.param("edac", "eta", (0.0, 5.0), dict(pretrain="actor+critic", pretrain_updates=100, num_critics=3,
+                                                 hidden=(32, 32)), marks=pytest.mark.slow),  # the same mechanism
 ])
 def test_vmapped_sweep_member_equals_single_run(tiny_dataset, algo_name, name, values, kw):
     """Member (value j, seed i) of a swept program equals a run with seed i and that value (the soft-return hook

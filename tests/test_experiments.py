@@ -158,6 +158,7 @@ def test_divergence_stops_cleanly_and_keeps_checkpoint(tmp_path, tiny_hdf5):
     assert (out / "curves.csv").exists()
 
 
+@pytest.mark.slow  # the worker processes are tested in tests/test_workers.py and by the Ctrl-C test below
 def test_parallel_variants_equal_one_after_another(tmp_path, tiny_hdf5):
     runs = {n: tmp_path / f"parallel{n}" for n in (1, 2)}
     for n, out in runs.items():

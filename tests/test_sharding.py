@@ -5,6 +5,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 
 SCRIPT = r"""
@@ -32,6 +34,7 @@ def run(devices: int) -> dict:
     return json.loads(out.strip().splitlines()[-1])
 
 
+@pytest.mark.slow  # tests/test_distributed.py splits the members over two devices (of two processes) in CI
 def test_two_devices_match_one():
     one, two = run(1), run(2)
     assert one["shards"] == 1 and two["devices"] == 2 and two["shards"] == 2
