@@ -170,6 +170,9 @@ def test_default_cache_dir_is_a_minari_id_that_minari_lists(tmp_path, monkeypatc
 
     with pytest.warns(UserWarning, match="generated capped at 1,000 transitions"):  # a full-size run is told
         assert len(datasets.load("hopper-medium")) == 1000
+    monkeypatch.delenv("MINARI_DATASETS_PATH")
+    with pytest.warns(UserWarning, match="capped"):  # its Minari id, as Minari writes it, names it too
+        assert datasets.load("hopper-medium-v0").name == "hopper-medium"
     out.rename(tmp_path / "datasets" / "hopper-medium")  # a cache from before the -v0 suffix is moved, not redone
     assert dataset_dir("hopper-medium") == out and (out / "data" / "metadata.json").is_file()
 
