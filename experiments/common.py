@@ -51,6 +51,14 @@ def nonempty(text: str) -> str:
     return text
 
 
+def host_port(text: str) -> str:
+    """HOST:PORT of process 0 of a multi-process run (the port an integer in [1, 65535])."""
+    host, _, port = text.rpartition(":")
+    if not host or not port.isdigit() or not 1 <= int(port) <= 65535 or any(c.isspace() for c in text):
+        raise argparse.ArgumentTypeError(f"expected HOST:PORT with a port in [1, 65535], got {text!r}")
+    return text
+
+
 def plain_path(text: str) -> Path:
     """An output path without control characters (a newline in a directory name would split every log line)."""
     if not text or any(ord(c) < 32 or ord(c) == 127 for c in text):
@@ -75,7 +83,7 @@ def run_args(parser: argparse.ArgumentParser, updates: int | None, eval_every: i
     g.add_argument("--batch-size", type=positive_int, default=256)
     g.add_argument("--checkpoint-every", type=int_at_least(0), default=0,
                    help="updates between checkpoints (0: every evaluation)")
-    g.add_argument("--keep-checkpoints", type=int_at_least(0), default=0,
+    g.add_argument("--keep-checkpoints", type=int_at_least(0, 2**31 - 1), default=0,
                    help="besides the last and the best, keep the N newest periodic checkpoints as "
                         "checkpoints/<variant>.<update>.msgpack (default 0)")
     g.add_argument("--dataset-path", type=nonempty, default=None,
@@ -109,7 +117,7 @@ def run_args(parser: argparse.ArgumentParser, updates: int | None, eval_every: i
     m.add_argument("--distributed", action="store_true",
                    help="one run over every process JAX finds in the cluster's environment (SLURM, a TPU slice, "
                         "Open MPI); needs --out or --resume")
-    m.add_argument("--coordinator", default=None, metavar="HOST:PORT",
+    m.add_argument("--coordinator", type=host_port, default=None, metavar="HOST:PORT",
                    help="or set the processes by hand: process 0's address, with --num-processes and --process-id")
     m.add_argument("--num-processes", type=positive_int, default=None)
     m.add_argument("--process-id", type=int_at_least(0), default=None)
@@ -294,6 +302,9 @@ def start_processes(args) -> bool:
         raise UsageError("a multi-process run needs --out (or --resume): every process must name the same directory")
     from offrl_jax import distributed
 
+    if not args.distributed:  # a missing partner would otherwise look like a silent hang
+        print(f"process {args.process_id} of {args.num_processes}: joining the run at {args.coordinator} (waiting up "
+              "to 5 minutes for the others)", file=sys.stderr, flush=True)
     try:
         distributed.initialize(*manual) if not args.distributed else distributed.initialize()
     except (RuntimeError, ValueError) as e:

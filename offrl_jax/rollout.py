@@ -13,6 +13,7 @@ An .mp4 needs imageio-ffmpeg (`pip install -e ".[video]"`); a .gif needs only Pi
 """
 from __future__ import annotations
 
+import argparse
 import os
 import sys
 from pathlib import Path
@@ -58,7 +59,12 @@ def rollout(policy, episodes: int, video: Path | None = None, max_frames: int | 
 
 
 def _which(text: str) -> str | int:
-    return text if text in ("last", "best") else int_at_least(0)(text)
+    if text in ("last", "best"):
+        return text
+    try:
+        return int_at_least(0)(text)
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(f"expected last, best or an update number >= 0, got {text!r}") from None
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -144,6 +144,11 @@ def _one_line_error(module: str, *args: str, cwd=None):
     ("experiments.mujoco_medium", ["--config", "tests"], "tests: a directory without a config.json"),
     ("experiments.mujoco_medium", ["--dataset-path", ""], "empty string"),
     ("experiments.mujoco_medium", ["--out", "runs/a\tb"], "without control characters"),
+    ("experiments.mujoco_medium", ["--coordinator", "notanaddress", "--num-processes", "2", "--process-id", "0"],
+     "expected HOST:PORT"),
+    ("experiments.mujoco_medium", ["--coordinator", "localhost:-5", "--num-processes", "2", "--process-id", "0"],
+     "port in [1, 65535]"),
+    ("experiments.mujoco_medium", ["--keep-checkpoints", "99999999999999999999"], "integer in [0, 2147483647]"),
 ])
 def test_entry_point_refuses_bad_values_in_one_line(module, args, message):
     assert message in _one_line_error(module, *args)
