@@ -55,7 +55,7 @@ class LocalProcesses:
         import tempfile
         import threading
 
-        from offrl_jax.workers import SINGLE_THREAD_XLA, core_sets
+        from offrl_jax.workers import core_sets, single_threaded
 
         with socket.socket() as s:
             s.bind(("localhost", 0))
@@ -65,7 +65,7 @@ class LocalProcesses:
         for i in range(1, self.n):
             env = dict(os.environ)
             if len(share[i]) == 1:
-                env["XLA_FLAGS"] = f"{SINGLE_THREAD_XLA} {env.get('XLA_FLAGS', '')}".strip()
+                env["XLA_FLAGS"] = single_threaded(env)
             log = tempfile.TemporaryFile("w+")
             self.logs.append(log)
             self.procs.append(subprocess.Popen(
@@ -76,7 +76,7 @@ class LocalProcesses:
         if hasattr(os, "sched_setaffinity"):
             os.sched_setaffinity(0, share[0])
         if len(share[0]) == 1:
-            os.environ["XLA_FLAGS"] = f"{SINGLE_THREAD_XLA} {os.environ.get('XLA_FLAGS', '')}".strip()
+            os.environ["XLA_FLAGS"] = single_threaded()
         threading.Thread(target=self._watch, daemon=True).start()
         initialize(f"localhost:{port}", self.n, 0)
 

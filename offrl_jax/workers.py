@@ -30,6 +30,12 @@ SINGLE_THREAD_XLA = "--xla_cpu_multi_thread_eigen=false"
 STOP_GRACE_S = 30.0
 
 
+def single_threaded(env: dict | None = None) -> str:
+    """XLA_FLAGS for a process pinned to one core: single-threaded XLA, with the user's own flags last (they win)."""
+    env = os.environ if env is None else env
+    return f"{SINGLE_THREAD_XLA} {env.get('XLA_FLAGS', '')}".strip()
+
+
 def core_sets(parallel: int) -> list[list[int]]:
     """The cores this process may use, dealt round-robin into `parallel` sets (fewer when there are fewer cores)."""
     cores = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else list(range(os.cpu_count() or 1))
@@ -101,7 +107,7 @@ def _worker(index: int, target: Callable, task: tuple, cores: list[int], conn, s
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, cores)
     if len(cores) == 1:  # before JAX starts its backend; a user's own XLA_FLAGS come last and win
-        os.environ["XLA_FLAGS"] = f"{SINGLE_THREAD_XLA} {os.environ.get('XLA_FLAGS', '')}".strip()
+        os.environ["XLA_FLAGS"] = single_threaded()
     try:
         result = target(*task, _Bar(conn), _Recorder(conn, _Stop(stop, parent)))
         conn.send(("done", result))
