@@ -27,7 +27,7 @@ import threading
 import time
 
 from offrl_jax.cli import OneLineParser, positive_int
-from offrl_jax.workers import core_sets, single_threaded
+from offrl_jax.workers import SINGLE_THREAD_XLA, core_sets
 
 CASES = ("threads", "threads-1t", "processes", "pinned-1t", "alone")
 
@@ -74,7 +74,7 @@ def _time_programs(programs: int, seeds: int, calls: int, transitions: int, star
 
 def run_case(case: str, args) -> float:
     """Updates/s summed over every seed of every variant of `case`, each part in a fresh process."""
-    single = {"XLA_FLAGS": single_threaded()}
+    single = {"XLA_FLAGS": f"{SINGLE_THREAD_XLA} {os.environ.get('XLA_FLAGS', '')}".strip()}
     threads = case.startswith("threads")
     procs = 1 if threads or case == "alone" else args.variants
     programs = 1 if case == "alone" else (args.variants if threads else 1)

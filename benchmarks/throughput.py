@@ -13,8 +13,11 @@ synthetic 100k-transition hopper-shaped dataset (obs 11, act 3), batch 256, defa
                         before the case (the background load changes); `matmul1024_gflops` is a 1024^2 matmul
     pct_of_peak         100 * achieved_gflops / peak_gflops
 
-Seeds are placed as `Driver` places them (`offrl_jax.driver.seed_sharding`): the seed axis split over every device
-that divides S, the dataset replicated; e.g. XLA_FLAGS=--xla_force_host_platform_device_count=2 gives 2 CPU devices.
+Seeds are placed as `Driver` places them (`offrl_jax.driver.member_layout`): split over the devices (padded with copies
+of the last seed when they do not divide; the copies' updates are not counted), the dataset replicated, and on each
+device run one after another (`--members map`, the CPU's default) or batched (`--members vmap`, elsewhere).  E.g.
+XLA_FLAGS="--xla_cpu_multi_thread_eigen=false --xla_force_host_platform_device_count=2" gives 2 single-threaded CPU
+devices, as the command line gives a process on 2 cores (`offrl_jax.workers.cpu_flags`).
 
 Progress goes to stderr, results to stdout (a table, or one JSON object per line with --json).  `--out NAME` also
 writes the JSON lines to results/benchmarks/NAME.jsonl (first line: {"meta": {command, date, machine, load}}).
@@ -40,7 +43,7 @@ from benchmarks.flops import chain_flops, update_flops
 from offrl_jax.algos import make_algorithm, make_config
 from offrl_jax.cli import OneLineParser, check_writable_file, number, positive_int
 from offrl_jax.data.dataset import Dataset
-from offrl_jax.driver import CHUNK, INIT, device_data, make_chunk_fn, seed_keys, seed_sharding
+from offrl_jax.driver import CHUNK, INIT, device_data, make_chunk_fn, member_layout, seed_keys
 
 OBS_DIM, ACT_DIM, BATCH = 11, 3, 256  # hopper
 RESULTS_DIR = Path("results/benchmarks")
@@ -170,7 +173,7 @@ def init_states(case: Case, max_seeds: int, n_rows: int):
 
 
 def time_case(case: Case, seeds: int, data: dict[str, jax.Array], all_states, peak: float, expect_gflops: float,
-              target_s: float, max_reps: int, heavy_s: float) -> dict[str, Any]:
+              target_s: float, max_reps: int, heavy_s: float, mode: str | None = None) -> dict[str, Any]:
     """Compile and time the chunk function of `case` for `seeds` vmapped seeds.
 
     Chunk length: about `target_s` seconds at `expect_gflops`.  One warm-up chunk, then the median of `max_reps`
@@ -187,14 +190,16 @@ def time_case(case: Case, seeds: int, data: dict[str, jax.Array], all_states, pe
     calls = int(np.clip(round(target_s * expect_gflops * 1e9 / (per_call * seeds)), 1, 2000))
     predicted_s = calls * per_call * seeds / (expect_gflops * 1e9)
 
-    seed_ids = tuple(range(seeds))
-    states = jax.tree.map(lambda x: jnp.array(x[:seeds], copy=True), all_states)  # own buffers: donated
-    keys = seed_keys(seed_ids, CHUNK)
-    sharding, replicated = seed_sharding(seeds)  # as `Driver` places them: the seed axis split over the devices
-    states, keys = jax.device_put(states, sharding), jax.device_put(keys, sharding)
-    data = jax.device_put(data, replicated)
+    layout = member_layout(seeds, mode=mode)  # as `Driver` places them; padded with copies of the last seed
+
+    def place(x):  # the first S members, padded; own buffers (donated)
+        x = np.asarray(x[:seeds])
+        return jax.device_put(np.concatenate([x, np.repeat(x[-1:], layout.padded - seeds, axis=0)]), layout.split)
+    states = jax.tree.map(place, all_states)
+    keys = place(seed_keys(tuple(range(seeds)), CHUNK))
+    data = jax.device_put(data, layout.replicated)
     tic = time.perf_counter()
-    compiled = make_chunk_fn(phase, BATCH, calls).lower(states, data, keys, jnp.int32(0)).compile()
+    compiled = make_chunk_fn(phase, BATCH, calls, layout=layout).lower(states, data, keys, jnp.int32(0)).compile()
     compile_s = time.perf_counter() - tic
 
     def run_chunk(states, index):
@@ -230,7 +235,9 @@ def time_case(case: Case, seeds: int, data: dict[str, jax.Array], all_states, pe
         "peak_gflops": round(peak, 2),
         "pct_of_peak": round(100 * achieved / peak, 1),
         "num_critics": config.num_critics,
-        "devices": len(sharding.mesh.devices.flat),
+        "devices": layout.mesh.size,
+        "members_mode": layout.mode,
+        "padded_members": layout.padded,
         "updates_per_chunk": calls * phase.updates_per_call,
         "timed_chunks": reps,
         "warmup": warmup,
@@ -284,6 +291,9 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     p.add_argument("--phase", nargs="+", choices=sorted({c.phase for c in CASES}), metavar="PHASE",
                    help="only these phase labels: %(choices)s (default: all)")
     p.add_argument("--num-critics", nargs="+", type=positive_int, help="only cases with these ensemble sizes")
+    p.add_argument("--members", choices=("map", "vmap"), default=None,
+                   help="how a device runs its seeds: one after another (map) or batched (vmap); default: map on the "
+                        "CPU, vmap elsewhere, as the driver does")
     p.add_argument("--json", action="store_true", help="one JSON object per case on stdout")
     p.add_argument("--quick", action="store_true", help="one tiny case (BC, S=1, at most 10k rows, 2 short timed "
                    "chunks): a smoke test; takes none of the case-selection and timing flags")
@@ -326,7 +336,8 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     if args.quick:
         fixed = [flag for flag, value in (("--algo", args.algo), ("--phase", args.phase), ("--seeds", args.seeds),
                                           ("--num-critics", args.num_critics), ("--target-s", args.target_s),
-                                          ("--reps", args.reps)) if value is not None]
+                                          ("--reps", args.reps), ("--members", args.members))
+                 if value is not None]
         if fixed:
             p.error(f"--quick runs one fixed case (BC, S=1, 2 short timed chunks), so it takes no {', '.join(fixed)}; "
                     "drop --quick to choose the cases and timing")
@@ -373,7 +384,8 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
         all_states = init_states(case, max(seed_counts), int(data["rewards"].shape[0]))
         expect = 0.4 * peak  # achieved-rate guess for sizing chunks; then the previous seed count's rate
         for s in sorted(seed_counts):
-            r = time_case(case, s, data, all_states, peak, expect, args.target_s, args.reps, args.heavy_s)
+            r = time_case(case, s, data, all_states, peak, expect, args.target_s, args.reps, args.heavy_s,
+                          args.members)
             expect = max(r["achieved_gflops"], 1.0)
             r["matmul1024_gflops"] = round(matmul, 2)
             results.append(r)

@@ -20,10 +20,12 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from experiments.launch import start_local_processes, start_processes, use_cpu_cores
 from offrl_jax import datasets
 from offrl_jax.checkpoint import atomic_write_text
-from offrl_jax.cli import (  # noqa: F401  (OneLineParser, positive_int: re-exported, the studies import them here)
+from offrl_jax.cli import (  # noqa: F401  (OneLineParser, positive_int, UsageError: re-exported, the studies import them here)
     OneLineParser,
+    UsageError,
     check_writable_dir,
     int_at_least,
     lock_run_dir,
@@ -39,10 +41,6 @@ from offrl_jax.results import print_table
 from offrl_jax.resume import check_resume
 from offrl_jax.runner import Diverged, run_study
 from offrl_jax.study import Study, Variant
-
-
-class UsageError(ValueError):
-    pass
 
 
 def nonempty(text: str) -> str:
@@ -112,8 +110,8 @@ def run_args(parser: argparse.ArgumentParser, updates: int | None, eval_every: i
     m = parser.add_argument_group("many processes or hosts (jax.distributed; offrl_jax/distributed.py)")
     m.add_argument("--processes", type=positive_int, default=1,
                    help="split the seeds of every variant over N processes of this machine, each on its share of "
-                        "the cores (one run: process 0 writes it); the seeds (x sweep values) must divide by N "
-                        "(default 1)")
+                        "the cores (one run: process 0 writes it; default 1). One process already splits a "
+                        "variant's seeds over its cores, so this is mostly a test of a multi-host launch")
     m.add_argument("--distributed", action="store_true",
                    help="one run over every process JAX finds in the cluster's environment (SLURM, a TPU slice, "
                         "Open MPI); needs --out or --resume")
@@ -282,50 +280,6 @@ def replay(saved: Study | list[Study], args, given: set[str], hparams: dict) -> 
     return [one(s) for s in saved] if isinstance(saved, list) else one(saved)
 
 
-def start_processes(args) -> bool:
-    """Join the other processes of a multi-process run if the flags ask for one; returns whether this process
-    writes the run's files (process 0, or the only one)."""
-    manual = (args.coordinator, args.num_processes, args.process_id)
-    if args.processes > 1 and (args.distributed or any(x is not None for x in manual)):
-        raise UsageError("--processes starts its own processes on this machine; --distributed and --coordinator "
-                         "join processes started elsewhere: give one or the other")
-    if not args.distributed and all(x is None for x in manual):
-        return True
-    if args.distributed and any(x is not None for x in manual):
-        raise UsageError("--distributed reads the cluster's environment; --coordinator/--num-processes/--process-id "
-                         "set the processes by hand: give one or the other")
-    if not args.distributed and any(x is None for x in manual):
-        raise UsageError("--coordinator, --num-processes and --process-id go together")
-    if not args.distributed and args.process_id >= args.num_processes:
-        raise UsageError(f"--process-id {args.process_id} must be below --num-processes {args.num_processes}")
-    if args.out is None and args.resume is None:
-        raise UsageError("a multi-process run needs --out (or --resume): every process must name the same directory")
-    from offrl_jax import distributed
-
-    if not args.distributed:  # a missing partner would otherwise look like a silent hang
-        print(f"process {args.process_id} of {args.num_processes}: joining the run at {args.coordinator} (waiting up "
-              "to 5 minutes for the others)", file=sys.stderr, flush=True)
-    try:
-        distributed.initialize(*manual) if not args.distributed else distributed.initialize()
-    except (RuntimeError, ValueError) as e:
-        raise UsageError(f"jax.distributed could not start ({' '.join(str(e).split())[:300]})") from None
-    return distributed.is_writer()
-
-
-def _child_argv(argv, args, out: Path) -> list[str]:
-    """The command line of the other processes of a --processes run: this one's, without --processes, with the
-    output directory this process chose."""
-    argv, kept, skip = list(sys.argv[1:] if argv is None else argv), [], False
-    for token in argv:
-        if skip:
-            skip = False
-        elif token == "--processes":
-            skip = True
-        elif not token.startswith("--processes="):
-            kept.append(token)
-    return kept + (["--out", str(out)] if args.out is None and args.resume is None else [])
-
-
 def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parser: argparse.ArgumentParser,
                argv=None, hparams: Callable[[argparse.Namespace], dict] | None = None,
                hparam_dests: frozenset[str] = frozenset()) -> int:
@@ -368,6 +322,7 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
             built = replay(saved_studies(path.parent, path), args, given, typed)
         elif args.resume is None:
             built = build(args)  # validates every hyper-parameter and budget
+        use_cpu_cores(built if args.resume is None else saved_studies(args.resume))
         writer = start_processes(args)
         if writer:
             out, replace = output_dir(args, parser.prog.split(".")[-1])
@@ -380,17 +335,7 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
             if "updates" in given:
                 built = extend(built, args.updates)
         studies = built if isinstance(built, list) else [built]
-        if args.processes > 1:  # this process becomes process 0 of a run over N local processes
-            for study in studies:
-                for group, _ in study.groups():
-                    if (len(study.seeds) * len(group)) % args.processes:
-                        raise UsageError(f"--processes {args.processes}: {study.name}'s {len(study.seeds)} seeds "
-                                         f"(x {len(group)} sweep values) do not divide over {args.processes} "
-                                         "processes")
-            from offrl_jax.distributed import LocalProcesses
-
-            local = LocalProcesses(args.processes, parser.prog, _child_argv(argv, args, out))
-            local.start()
+        local = start_local_processes(args, argv, parser.prog, out)
         loaded: dict = {}  # bad data fails here, before anything is written; each dataset is loaded once
         for study in studies:
             if _data_key(study) not in loaded:

@@ -11,6 +11,10 @@ from collections.abc import Callable
 from pathlib import Path
 
 
+class UsageError(ValueError):
+    """A command line that cannot run as given: reported as one line, exit 2."""
+
+
 def print_error(message: object) -> None:
     """One line on stderr, whatever the message holds: a newline in a path or a value is shown as \\n."""
     text = str(message).replace("\r", "\\r").replace("\n", "\\n")

@@ -1,8 +1,8 @@
 """Many processes (or hosts), one run: the member axis (seeds x sweep values) spans every process's devices.
 
-After `initialize`, `jax.devices()` lists the devices of every process, so the driver's seed sharding
-(`offrl_jax.driver.seed_sharding`) splits the members over all of them and every process runs the same jitted
-chunk on its own share.  Between chunks:
+After `initialize`, `jax.devices()` lists the devices of every process, so the driver's layout
+(`offrl_jax.driver.member_layout`) splits the members over all of them (padded with copies of the last member when
+they do not divide) and every process runs the same jitted chunk on its own share.  Between chunks:
 
 * metrics and states come to every host whole (`to_host`, an all-gather; a few MB at the sizes used here);
 * each process evaluates only its block of members (`my_block`), and the scores are gathered (`gather`);
@@ -41,7 +41,7 @@ def initialize(coordinator: str | None = None, num_processes: int | None = None,
 class LocalProcesses:
     """One run over `n` processes of this machine: this one is process 0 and starts processes 1..n-1 as copies of
     the command (`argv`, with the coordinator flags added), each pinned to its share of the cores with
-    single-threaded XLA where that share is one core, as `offrl_jax.workers` does for variants.  Call `start`
+    one single-threaded XLA device per core, as `offrl_jax.workers` does for variants.  Call `start`
     before JAX's backend starts; `close` waits for the others (or stops them after a failure)."""
 
     def __init__(self, n: int, module: str, argv: list[str]):
@@ -55,7 +55,7 @@ class LocalProcesses:
         import tempfile
         import threading
 
-        from offrl_jax.workers import core_sets, single_threaded
+        from offrl_jax.workers import core_sets, cpu_flags
 
         with socket.socket() as s:
             s.bind(("localhost", 0))
@@ -64,8 +64,7 @@ class LocalProcesses:
         share = [cores[i % len(cores)] for i in range(self.n)]
         for i in range(1, self.n):
             env = dict(os.environ)
-            if len(share[i]) == 1:
-                env["XLA_FLAGS"] = single_threaded(env)
+            env["XLA_FLAGS"] = cpu_flags(len(share[i]), env)
             log = tempfile.TemporaryFile("w+")
             self.logs.append(log)
             self.procs.append(subprocess.Popen(
@@ -75,8 +74,7 @@ class LocalProcesses:
                 if hasattr(os, "sched_setaffinity") else None))
         if hasattr(os, "sched_setaffinity"):
             os.sched_setaffinity(0, share[0])
-        if len(share[0]) == 1:
-            os.environ["XLA_FLAGS"] = single_threaded()
+        os.environ["XLA_FLAGS"] = cpu_flags(len(share[0]))
         threading.Thread(target=self._watch, daemon=True).start()
         initialize(f"localhost:{port}", self.n, 0)
 
@@ -142,18 +140,24 @@ def to_host(tree: Any) -> Any:
 
 
 def my_block(members: int) -> slice:
-    """The contiguous block of members this process evaluates (members divide evenly over the processes)."""
-    size = members // jax.process_count()
-    return slice(jax.process_index() * size, (jax.process_index() + 1) * size)
+    """The contiguous block of members this process evaluates: blocks of ceil(members / processes), the last ones
+    shorter (or empty)."""
+    size = -(-members // jax.process_count())
+    start = min(members, jax.process_index() * size)
+    return slice(start, min(members, start + size))
 
 
-def gather(local: np.ndarray) -> np.ndarray:
-    """Every process's block (same shape on each), concatenated in process order."""
+def gather(local: np.ndarray, members: int) -> np.ndarray:
+    """Every process's block of a (members, ...) array (`my_block`), concatenated in process order."""
     if jax.process_count() == 1:
         return np.asarray(local)
     from jax.experimental import multihost_utils
 
-    return np.array(multihost_utils.process_allgather(np.asarray(local), tiled=True))  # a writable copy
+    local = np.asarray(local, np.float64)
+    size = -(-members // jax.process_count())  # every process sends a whole block, NaN-padded
+    block = np.full((size, *local.shape[1:]), np.nan)
+    block[:len(local)] = local
+    return np.array(multihost_utils.process_allgather(block, tiled=True))[:members]  # a writable copy
 
 
 def evaluate_shared(states: Any, evaluate: Callable[[Any], np.ndarray]) -> tuple[Any, np.ndarray]:
@@ -162,12 +166,7 @@ def evaluate_shared(states: Any, evaluate: Callable[[Any], np.ndarray]) -> tuple
     if jax.process_count() == 1:
         return states, np.asarray(evaluate(states))
     states = to_host(states)
-    block = my_block(len(jax.tree.leaves(states)[0]))
-    return states, gather(evaluate(jax.tree.map(lambda x: x[block], states)))
-
-
-def check_members(members: int) -> None:
-    """With several processes, the members must divide over every device (each process holds the same number)."""
-    if jax.process_count() > 1 and members % jax.device_count():
-        raise ValueError(f"{members} members (seeds x sweep values) do not divide over the {jax.device_count()} "
-                         f"devices of {jax.process_count()} processes; use a multiple of {jax.device_count()}")
+    members = len(jax.tree.leaves(states)[0])
+    block = my_block(members)
+    mine = evaluate(jax.tree.map(lambda x: x[block], states)) if block.stop > block.start else np.zeros(0)
+    return states, gather(mine, members)

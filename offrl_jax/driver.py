@@ -1,10 +1,17 @@
 """The training driver: a run is a list of phases; between evaluations it runs K updates as one jitted `lax.scan`,
-sampling minibatches on the device inside the scan, for S seeds at once with `jax.vmap` over the whole agent state.
+sampling minibatches on the device inside the scan, for S seeds (members) at once in one program.
+
+Where the members go (`member_layout`): split over the devices (`jax.shard_map` over a 1-D mesh), and on each device
+batched with `jax.vmap` (GPU, TPU) or run one after another with `lax.map` (CPU, where batched matmuls are slower
+than plain ones: +34 % updates/s at S = 4 on one core, benchmarks/README.md).  On the CPU the command line gives a
+process one single-threaded XLA device per core (`offrl_jax.workers.cpu_flags`), so one run of S seeds fills every
+core.  Members that do not divide over the devices are padded with copies of the last one, whose results are dropped.
 
 Randomness is a pure function of (seed, global update index): the key of the update call at update u is
 fold_in(fold_in(PRNGKey(seed), CHUNK), u), drawn inside the scan.  So how the updates are cut into chunks (the
-evaluation interval, a resume, a self-ending phase's windows) does not change training, and seed i of a vmapped run
-is a single run with seed i (up to the float rounding of batched matmuls, bounded in tests/test_driver.py).
+evaluation interval, a resume, a self-ending phase's windows) does not change training, and seed i of a run is a
+single run with seed i (exactly with `lax.map`; up to the float rounding of batched matmuls with `vmap`, bounded in
+tests/test_driver.py).
 
 A hyper-parameter sweep (`Driver(..., sweep=("alpha", (1.0, 2.5, 10.0)))`) runs every (value, seed) pair as one
 member of the same vmapped program: the members' axis is value-major (member j * S + i = value j, seed i), each member
@@ -26,7 +33,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
 from offrl_jax.algos.common import Phase, with_hparams
 from offrl_jax.data.dataset import Dataset, normalize_obs
 from offrl_jax.data.returns import returns_to_go
-from offrl_jax.distributed import check_members, to_host
+from offrl_jax.distributed import to_host
 
 DATA_FIELDS = ("observations", "actions", "rewards", "next_observations", "terminals", "timeouts", "returns")
 
@@ -71,10 +78,47 @@ def check_call_grid(phases: list[Phase], chunk_updates: int) -> None:
         start += p.steps
 
 
+@dataclasses.dataclass(frozen=True)
+class Layout:
+    """Where the members of a run go: `padded` members (the `members` of the run, then copies of the last one) split
+    evenly over `mesh` (1-D, axis "members"), each device running its share batched ("vmap") or one after another
+    ("map")."""
+    mesh: Mesh
+    members: int
+    padded: int
+    mode: str
+
+    @property
+    def split(self) -> NamedSharding:
+        return NamedSharding(self.mesh, P("members"))
+
+    @property
+    def replicated(self) -> NamedSharding:
+        return NamedSharding(self.mesh, P())
+
+
+def member_layout(members: int, devices=None, mode: str | None = None) -> Layout:
+    """The layout of `members` members over `devices` (default: every device; with one process, the fewest devices
+    that give the busiest device as few members as all of them would).  `mode` defaults to "map" on the CPU and
+    "vmap" elsewhere.  With several processes every device takes part, since every process runs the program."""
+    devices = list(jax.devices() if devices is None else devices)
+    if jax.process_count() == 1:
+        per_device = -(-members // len(devices))
+        devices = devices[:-(-members // per_device)]
+    mode = mode or ("map" if devices[0].platform == "cpu" else "vmap")
+    if mode not in ("map", "vmap"):
+        raise ValueError(f"member mode must be 'map' or 'vmap', not {mode!r}")
+    padded = -(-members // len(devices)) * len(devices)
+    return Layout(Mesh(np.array(devices), ("members",)), members, padded, mode)
+
+
 def make_chunk_fn(phase: Phase, batch_size: int, num_calls: int,
-                  phase_for: Callable[[dict[str, jax.Array]], Phase] | None = None) -> Callable:
-    """jit(vmap(scan of `num_calls` update calls)):
-    (states (S..), data, keys (S, 2), start update ()) -> (states, metrics (S, ...)).
+                  phase_for: Callable[[dict[str, jax.Array]], Phase] | None = None,
+                  layout: Layout | None = None) -> Callable:
+    """jit(members(scan of `num_calls` update calls)):
+    (states (M..), data, keys (M, 2), start update ()) -> (states, metrics (M, ...)).
+
+    `layout` places the members (`member_layout`; default: one device, its default mode); M is its padded count.
 
     `keys` are the members' run keys (`seed_keys(seeds, CHUNK)`); the call at global update u uses fold_in(key, u),
     so the result does not depend on where chunks begin.  With `phase_for` (a sweep: hyper-parameters -> the phase
@@ -100,25 +144,36 @@ def make_chunk_fn(phase: Phase, batch_size: int, num_calls: int,
         finite &= jnp.all(jnp.stack([jnp.all(jnp.isfinite(p)) for p in jax.tree.leaves(state)]))
         return state, jax.tree.map(lambda m: jnp.mean(m, axis=0), metrics) | {"finite": finite}
 
+    fn, in_axes = one_seed, (0, None, 0, None, 0)
     if phase_for is None:
-        return jax.jit(vmap_members(lambda s, d, k, u: one_seed(s, d, k, u, None), in_axes=(0, None, 0, None)),
-                       donate_argnums=0)
-    return jax.jit(vmap_members(one_seed, in_axes=(0, None, 0, None, 0)), donate_argnums=0)
+        fn, in_axes = (lambda s, d, k, u: one_seed(s, d, k, u, None)), in_axes[:4]
+    mode = layout.mode if layout is not None else member_layout(1).mode
+    fn = over_members(fn, in_axes, mode)
+    if layout is not None and layout.mesh.size > 1:  # each device runs `fn` on its own block of members
+        fn = jax.shard_map(fn, mesh=layout.mesh, in_specs=tuple(P() if ax is None else P("members") for ax in in_axes),
+                           out_specs=P("members"))
+    return jax.jit(fn, donate_argnums=0)
 
 
-def vmap_members(fn: Callable, in_axes: tuple) -> Callable:
-    """`jax.vmap(fn, in_axes)`, except that one member runs `fn` itself on the squeezed arguments.
+def over_members(fn: Callable, in_axes: tuple, mode: str = "vmap") -> Callable:
+    """`fn` over the leading (member) axis of the arguments whose `in_axes` is 0: batched (`jax.vmap`) or one member
+    after another (`lax.map`, "map"); one member runs `fn` itself on the squeezed arguments either way.
 
-    A vmap over an axis of size 1 is not free on XLA CPU: batched matmuls and batch-axis reductions are slower than
-    the plain ones (measured in benchmarks/README.md).  The same results either way, up to float rounding.
+    On XLA CPU batched matmuls and batch-axis reductions are slower than plain ones, even over an axis of size 1
+    (benchmarks/README.md), so "map" is faster there; "vmap" is what fills a GPU.
     """
-    vmapped = jax.vmap(fn, in_axes=in_axes)
-
     def call(*args):
-        if jax.tree.leaves(args[0])[0].shape[0] != 1:
-            return vmapped(*args)
-        squeeze = [a if ax is None else jax.tree.map(lambda x: x[0], a) for a, ax in zip(args, in_axes)]
-        return jax.tree.map(lambda x: x[None], fn(*squeeze))
+        members = [a for a, ax in zip(args, in_axes) if ax is not None]
+
+        def one(block):
+            it = iter(block)
+            return fn(*[a if ax is None else next(it) for a, ax in zip(args, in_axes)])
+
+        if jax.tree.leaves(args[0])[0].shape[0] == 1:
+            return jax.tree.map(lambda x: x[None], one(jax.tree.map(lambda x: x[0], members)))
+        if mode == "map":
+            return jax.lax.map(one, members)
+        return jax.vmap(fn, in_axes=in_axes)(*args)
 
     return call
 
@@ -136,51 +191,46 @@ class Chunk:
     ended: bool = False  # this chunk ended a self-ending (auto_stop) phase before its cap
 
 
-def seed_sharding(num_seeds: int, devices=None) -> tuple[NamedSharding, NamedSharding]:
-    """(seed-axis sharding, replicated sharding) over a 1-D mesh of the devices.
-
-    The seed axis is split over as many devices as divide it (all of them when S is a multiple of the device count;
-    one device otherwise), so 8 GPUs run 8x the seeds in the same time.  On one device this is a no-op.  Multi-host:
-    call `jax.distributed.initialize()` first; `jax.devices()` then spans every host and the same code runs.
-    """
-    devices = list(jax.devices() if devices is None else devices)
-    while num_seeds % len(devices):
-        devices = devices[:-1]
-    mesh = Mesh(np.array(devices), ("seeds",))
-    return NamedSharding(mesh, P("seeds")), NamedSharding(mesh, P())
-
-
 def _swept_on_start(phase_for: Callable[[dict[str, jax.Array]], Phase]) -> Callable:
     return lambda state, data, key, hparams: phase_for(hparams).on_start(state, data, key)
 
 
 class Driver:
     def __init__(self, algo, data: dict[str, jax.Array], seeds: tuple[int, ...], batch_size: int = 256,
-                 devices=None, sweep: tuple[str, tuple[float, ...]] | None = None):
+                 devices=None, sweep: tuple[str, tuple[float, ...]] | None = None, members: str | None = None):
         self.algo, self.seeds, self.batch_size, self.sweep = algo, tuple(seeds), batch_size, sweep
         values = tuple(sweep[1]) if sweep else (None,)
         self.members = tuple(s for _ in values for s in self.seeds)  # value-major: member j * S + i
-        check_members(len(self.members))
-        self.seed_axis, self.replicated = seed_sharding(len(self.members), devices)
+        self.layout = member_layout(len(self.members), devices, members)  # `members`: "map" / "vmap" (default: by platform)
+        pad = self.layout.padded - len(self.members)  # copies of the last member fill the last device
         if getattr(algo.cfg, "timeouts", "bootstrap") == "drop":  # CORL's loader: time-out rows are never sampled
             data = data | {"rows": jnp.asarray(np.flatnonzero(np.asarray(data["timeouts"]) == 0), jnp.int32)}
-        self.data = jax.device_put(data, self.replicated)  # one copy per device, shared by its seeds
+        self.data = jax.device_put(data, self.layout.replicated)  # one copy per device, shared by its members
         self.hparams = None
         if sweep:
             per_member = np.repeat(np.asarray(values, np.float32), len(self.seeds))
-            self.hparams = jax.device_put({sweep[0]: jnp.asarray(per_member)}, self.seed_axis)
-        self.run_keys = jax.device_put(seed_keys(self.members, CHUNK), self.seed_axis)
+            self.hparams = self.place({sweep[0]: per_member})
+        self.run_keys = jax.device_put(seed_keys(self.members + self.members[-1:] * pad, CHUNK), self.layout.split)
         self._chunk_fns: dict[tuple[str, int], Callable] = {}
 
     def init(self) -> Any:
-        states = jax.jit(jax.vmap(self.algo.init), out_shardings=self.seed_axis)(seed_keys(self.members, INIT, 0))
-        # Targets start equal to params; give every leaf its own buffer so the chunk function can donate them.
-        states = jax.tree.map(lambda x: jnp.array(x, copy=True), states)
-        return self.shard(states)
+        """The members' initial agent states (leading axis: the run's members, not padded)."""
+        return jax.jit(jax.vmap(self.algo.init))(seed_keys(self.members, INIT, 0))
 
-    def shard(self, states: Any) -> Any:
-        """Place a member-batched pytree with its leading axis split over the mesh."""
-        return jax.device_put(states, self.seed_axis)
+    def place(self, tree: Any) -> Any:
+        """A member-batched pytree padded to the layout's members (copies of the last) and split over the mesh; every
+        leaf gets its own buffer (targets start equal to params), so the chunk function can donate them."""
+        pad = self.layout.padded - len(self.members)
+        grow = (lambda x: x) if not pad else (lambda x: np.concatenate([x, np.repeat(x[-1:], pad, axis=0)]))
+        return jax.device_put(jax.tree.map(lambda x: grow(np.array(x)), tree), self.layout.split)
+
+    def real(self, tree: Any) -> Any:
+        """The run's own members of a padded member-batched pytree (on the host if it spans processes)."""
+        if self.layout.padded == len(self.members):
+            return tree
+        if jax.process_count() > 1:
+            tree = to_host(tree)
+        return jax.tree.map(lambda x: x[:len(self.members)], tree)
 
     def _phase_for(self, total: int, index: int) -> Callable[[dict[str, jax.Array]], Phase]:
         """hparams -> phase `index` of the algorithm rebuilt with those (traced) hyper-parameter values."""
@@ -189,7 +239,7 @@ class Driver:
     def _chunk_fn(self, phase: Phase, num_calls: int, phase_for=None) -> Callable:
         key = (phase.name, num_calls)
         if key not in self._chunk_fns:
-            self._chunk_fns[key] = make_chunk_fn(phase, self.batch_size, num_calls, phase_for)
+            self._chunk_fns[key] = make_chunk_fn(phase, self.batch_size, num_calls, phase_for, self.layout)
         return self._chunk_fns[key]
 
     def run(self, phases: list[Phase], chunk_updates: int, states: Any = None, start_update: int = 0,
@@ -207,7 +257,7 @@ class Driver:
         for name, end in (ended or {}).items():
             _end_phase(phases, [p.name for p in phases].index(name), end)
         check_call_grid(phases, chunk_updates)
-        states = self.init() if states is None else self.shard(states)
+        states = self.place(self.init() if states is None else states)
         total = sum(p.steps for p in phases)
         extra = () if self.hparams is None else (self.hparams,)
         phase_start = 0
@@ -221,8 +271,8 @@ class Driver:
             if phase.on_start is not None and start_update == phase_start:
                 hook = jax.jit(jax.vmap(phase.on_start, in_axes=(0, None, 0)) if phase_for is None else
                                jax.vmap(_swept_on_start(phase_for), in_axes=(0, None, 0, 0)))
-                states = hook(states, self.data, jax.device_put(seed_keys(self.members, PHASE_START, index),
-                                                                self.seed_axis), *extra)
+                keys = seed_keys(self.members, PHASE_START, index)
+                states = hook(states, self.data, self.place(keys), *extra)
             update = max(start_update, phase_start)
             auto = phase.auto_stop  # the metrics of the last whole window of this phase, if any
             previous = last_metrics if auto is not None and update - phase_start >= auto.window else None
@@ -234,7 +284,7 @@ class Driver:
                 tic = time.perf_counter()
                 states, metrics = self._chunk_fn(phase, calls, phase_for)(states, self.data, self.run_keys,
                                                                           jnp.int32(update), *extra)
-                metrics = to_host(metrics)  # every member's, on every process
+                metrics = self.real(to_host(metrics))  # every member's, on every process
                 elapsed = time.perf_counter() - tic
                 seconds += elapsed
                 update += calls * phase.updates_per_call
@@ -246,8 +296,8 @@ class Driver:
                         _end_phase(phases, index, update)
                         phase_end = update
                 if auto is None or update % chunk_updates == 0 or update == phase_end:
-                    yield Chunk(phase.name, update, states, metrics, seconds, calls * phase.updates_per_call / elapsed,
-                                ended=stop)
+                    yield Chunk(phase.name, update, self.real(states), metrics, seconds,
+                                calls * phase.updates_per_call / elapsed, ended=stop)
             phase_start = phase_end
             start_update = update
 

@@ -30,10 +30,21 @@ SINGLE_THREAD_XLA = "--xla_cpu_multi_thread_eigen=false"
 STOP_GRACE_S = 30.0
 
 
-def single_threaded(env: dict | None = None) -> str:
-    """XLA_FLAGS for a process pinned to one core: single-threaded XLA, with the user's own flags last (they win)."""
+USER_XLA_FLAGS = "OFFRL_JAX_USER_XLA_FLAGS"  # the user's own XLA_FLAGS, kept aside the first time they are extended
+
+
+def cpu_flags(cores: int, env: dict | None = None) -> str:
+    """XLA_FLAGS for a process given `cores` CPU cores: one single-threaded XLA device per core, so that a run's
+    members split over the cores (`offrl_jax.driver.member_layout`).  The user's own flags come last and win; they
+    are kept in `env` under OFFRL_JAX_USER_XLA_FLAGS, so a process started from this one extends the same flags."""
     env = os.environ if env is None else env
-    return f"{SINGLE_THREAD_XLA} {env.get('XLA_FLAGS', '')}".strip()
+    user = env.setdefault(USER_XLA_FLAGS, env.get("XLA_FLAGS", ""))
+    return f"{SINGLE_THREAD_XLA} --xla_force_host_platform_device_count={max(1, cores)} {user}".strip()
+
+
+def process_cores() -> int:
+    """The number of cores this process may use."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 
 
 def core_sets(parallel: int) -> list[list[int]]:
@@ -106,8 +117,7 @@ def _worker(index: int, target: Callable, task: tuple, cores: list[int], conn, s
     _die_with_parent()
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, cores)
-    if len(cores) == 1:  # before JAX starts its backend; a user's own XLA_FLAGS come last and win
-        os.environ["XLA_FLAGS"] = single_threaded()
+    os.environ["XLA_FLAGS"] = cpu_flags(len(cores))  # before JAX starts its backend
     try:
         result = target(*task, _Bar(conn), _Recorder(conn, _Stop(stop, parent)))
         conn.send(("done", result))

@@ -1,6 +1,7 @@
 """A run spread over 2 local CPU processes (`jax.distributed`, gloo collectives, a localhost coordinator) equals the
 same run in one process: same curves to float tolerance, one set of files written by process 0, and `--resume`
-(here extending the run) by two processes again.  The first two-process part is started as `--processes 2` (the
+(here extending the run) by two processes again.  Its 3 seeds do not divide over the 2 processes: the second
+pads its share with a copy of the last seed, and evaluates one seed fewer.  The first two-process part is started as `--processes 2` (the
 command starts its second process itself), the resume by hand (`--coordinator/--num-processes/--process-id`)."""
 from __future__ import annotations
 
@@ -20,7 +21,7 @@ from .conftest import synthetic_dataset
 ROOT = Path(__file__).resolve().parents[1]
 
 TINY = ["--pretrain", "actor+critic", "--pretrain-updates", "100", "--eval-every", "100", "--eval-episodes", "1",
-        "--seeds", "4", "--hidden", "16", "16", "--batch-size", "32", "--no-progress"]
+        "--seeds", "3", "--hidden", "16", "16", "--batch-size", "32", "--no-progress"]
 
 
 def free_port() -> int:
@@ -61,13 +62,13 @@ def runs(tmp_path_factory):
 
 def test_two_processes_equal_one(runs):
     one, two = rows(runs[0]), rows(runs[1])
-    assert one.keys() == two.keys() and len(one) == 4 * 3
+    assert one.keys() == two.keys() and len(one) == 3 * 3
     for key, a in one.items():
         b = two[key]
         for name in ("score", "critic_loss", "actor_loss", "q_mean"):
             if a.get(name):
                 x, y = float(a[name]), float(b[name])
-                assert abs(x - y) <= 1e-3 * max(1.0, abs(x)), (key, name, x, y)
+                assert abs(x - y) <= 1e-6 * max(1.0, abs(x)), (key, name, x, y)
 
 
 def test_process_zero_writes_one_set_of_files(runs):

@@ -1,0 +1,89 @@
+"""Where a command's training runs: the CPU cores of this process, and the other processes of a multi-process run.
+
+* `use_cpu_cores`: on the CPU, one single-threaded XLA device per core of this process, so that one variant's
+  members (seeds x sweep values) split over every core (`offrl_jax.driver.member_layout`).
+* `start_processes`: join a run spread over processes started elsewhere (`--distributed`, or `--coordinator`,
+  `--num-processes`, `--process-id`).
+* `start_local_processes`: `--processes N`, one run over N processes of this machine that this command starts.
+
+Each must run before JAX starts its backend.
+"""
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+from offrl_jax.cli import UsageError
+from offrl_jax.study import Study
+from offrl_jax.workers import cpu_flags, process_cores
+
+
+def use_cpu_cores(built: Study | list[Study]) -> None:
+    """Give this process one single-threaded XLA device per core when a variant (or sweep group) has several members
+    to split over them.  A lone member keeps XLA's own thread pool, which gets more out of a second core for one
+    program (benchmarks/README.md, "One variant on both cores").  A GPU or TPU ignores these flags."""
+    import jax._src.xla_bridge as xla_bridge
+
+    studies = built if isinstance(built, list) else [built]
+    most = max(len(s.seeds) * len(group) for s in studies for group, _ in s.groups())
+    if most > 1 and process_cores() > 1 and not xla_bridge.backends_are_initialized():
+        os.environ["XLA_FLAGS"] = cpu_flags(process_cores())
+
+
+def start_processes(args) -> bool:
+    """Join the other processes of a multi-process run if the flags ask for one; returns whether this process
+    writes the run's files (process 0, or the only one)."""
+    manual = (args.coordinator, args.num_processes, args.process_id)
+    if args.processes > 1 and (args.distributed or any(x is not None for x in manual)):
+        raise UsageError("--processes starts its own processes on this machine; --distributed and --coordinator "
+                         "join processes started elsewhere: give one or the other")
+    if not args.distributed and all(x is None for x in manual):
+        return True
+    if args.distributed and any(x is not None for x in manual):
+        raise UsageError("--distributed reads the cluster's environment; --coordinator/--num-processes/--process-id "
+                         "set the processes by hand: give one or the other")
+    if not args.distributed and any(x is None for x in manual):
+        raise UsageError("--coordinator, --num-processes and --process-id go together")
+    if not args.distributed and args.process_id >= args.num_processes:
+        raise UsageError(f"--process-id {args.process_id} must be below --num-processes {args.num_processes}")
+    if args.out is None and args.resume is None:
+        raise UsageError("a multi-process run needs --out (or --resume): every process must name the same directory")
+    from offrl_jax import distributed
+
+    if not args.distributed:  # a missing partner would otherwise look like a silent hang
+        print(f"process {args.process_id} of {args.num_processes}: joining the run at {args.coordinator} (waiting up "
+              "to 5 minutes for the others)", file=sys.stderr, flush=True)
+    try:
+        distributed.initialize(*manual) if not args.distributed else distributed.initialize()
+    except (RuntimeError, ValueError) as e:
+        raise UsageError(f"jax.distributed could not start ({' '.join(str(e).split())[:300]})") from None
+    return distributed.is_writer()
+
+
+def _child_argv(argv, args, out: Path) -> list[str]:
+    """The command line of the other processes of a --processes run: this one's, without --processes, with the
+    output directory this process chose."""
+    argv, kept, skip = list(sys.argv[1:] if argv is None else argv), [], False
+    for token in argv:
+        if skip:
+            skip = False
+        elif token == "--processes":
+            skip = True
+        elif not token.startswith("--processes="):
+            kept.append(token)
+    return kept + (["--out", str(out)] if args.out is None and args.resume is None else [])
+
+
+
+
+def start_local_processes(args, argv, prog: str, out: Path):
+    """With --processes N > 1: this process becomes process 0 of a run over N processes of this machine and starts
+    the others (`offrl_jax.distributed.LocalProcesses`, to be closed at the end); otherwise None."""
+    if args.processes <= 1:
+        return None
+    from offrl_jax.distributed import LocalProcesses
+
+    local = LocalProcesses(args.processes, prog, _child_argv(argv, args, out))
+    local.start()
+    return local
