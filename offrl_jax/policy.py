@@ -43,7 +43,19 @@ class Policy:
     act_dim: int
 
     def __call__(self, obs) -> np.ndarray:
-        obs = np.asarray(obs, np.float32)
+        """Actions for raw observations (obs_dim,) or (B, obs_dim); a wrong shape or a NaN/inf observation raises
+        ValueError (a non-finite input would give non-finite actions)."""
+        try:
+            obs = np.asarray(obs, np.float32)
+        except (TypeError, ValueError):
+            raise ValueError(f"observations must be numbers, shaped ({self.obs_dim},) or (B, {self.obs_dim})") from None
+        if obs.ndim not in (1, 2) or obs.shape[-1] != self.obs_dim:
+            raise ValueError(f"observations shaped {obs.shape}; {self.env}'s policy takes ({self.obs_dim},) or "
+                             f"(B, {self.obs_dim})")
+        if not np.isfinite(obs).all():
+            bad = np.argwhere(~np.isfinite(obs.reshape(-1, self.obs_dim)))[0]
+            raise ValueError(f"observation {bad[0]} has a non-finite value (index {bad[1]}): the policy would "
+                             "return non-finite actions")
         if obs.ndim == 1:
             return np.asarray(self.act(obs[None]))[0]
         return np.asarray(self.act(obs))

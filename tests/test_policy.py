@@ -84,6 +84,19 @@ def test_one_observation_or_a_batch(run):
     np.testing.assert_allclose(policy(obs[2]), batch[2], rtol=1e-6, atol=1e-6)
 
 
+@pytest.mark.parametrize("obs, message", [
+    (np.full(11, np.nan), "observation 0 has a non-finite value"),
+    (np.stack([np.zeros(11), np.r_[np.zeros(10), np.inf]]), "observation 1 has a non-finite value"),
+    (np.zeros(7), r"shaped \(7,\)"),
+    (np.zeros((2, 3, 11)), r"shaped \(2, 3, 11\)"),
+    ([["a"] * 11], "must be numbers"),
+])
+def test_bad_observations_are_refused_not_acted_on(run, obs, message):
+    policy = load_policy(run)
+    with pytest.raises(ValueError, match=message):
+        policy(obs)
+
+
 def test_the_export_acts_like_the_policy_without_training_code(run, tmp_path):
     policy = load_policy(run, "edac", seed=0)
     path = policy.export(tmp_path / "edac.jaxexport")
