@@ -112,3 +112,50 @@ def test_scaling_runs_its_cases_at_a_tiny_size(capsys):
     rows = [json.loads(line) for line in capsys.readouterr().out.splitlines() if line.strip()]
     assert [(r["case"], r["seeds"], r["processes"]) for r in rows] == [("2processes", 2, 2)]
     assert all(r["updates_per_s"] > 0 for r in rows)
+
+
+UNIFLORAL_KEYS = {"ours_updates_per_s", "unifloral_updates_per_s", "ratio", "pairs", "layer_norm", "transitions",
+                  "updates_per_chunk", "xla_flags", "cores", "jax"}
+
+
+def test_unifloral_against_a_checkout_with_a_tiny_budget(capsys):
+    """benchmarks.unifloral end to end: needs distrax and a unifloral checkout named by UNIFLORAL_PATH."""
+    import os
+    from pathlib import Path
+
+    pytest.importorskip("distrax")
+    path = os.environ.get("UNIFLORAL_PATH")
+    if not path or not (Path(path) / "algorithms" / "td3_bc.py").is_file():
+        pytest.skip("set UNIFLORAL_PATH to a checkout of github.com/EmptyJackson/unifloral")
+    from benchmarks.unifloral import main
+
+    flags = os.environ.get("XLA_FLAGS")
+    result = main(["--unifloral", path, "--transitions", "2000", "--updates", "20", "--pairs", "1", "--json"])
+    assert os.environ.get("XLA_FLAGS") == flags  # their import sets XLA_FLAGS; the benchmark puts ours back
+    (line,) = [json.loads(line) for line in capsys.readouterr().out.splitlines() if line.strip()]
+    assert UNIFLORAL_KEYS <= line.keys() and line == result
+    assert line["pairs"] == 1 and line["layer_norm"] and line["updates_per_chunk"] == 20
+    assert line["ours_updates_per_s"] > 0 and line["unifloral_updates_per_s"] > 0
+
+
+def test_unifloral_bad_checkout_is_one_line_and_exit_2(capsys, tmp_path, monkeypatch):
+    import importlib.util
+
+    from benchmarks.unifloral import main
+
+    with pytest.raises(SystemExit) as exit_:
+        main(["--unifloral", str(tmp_path / "nowhere")])
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: ") and "algorithms/td3_bc.py" in err[0]
+
+    (tmp_path / "algorithms").mkdir()
+    (tmp_path / "algorithms" / "td3_bc.py").write_text("")
+    find_spec = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec",
+                        lambda name, *a: None if name == "distrax" else find_spec(name, *a))
+    with pytest.raises(SystemExit) as exit_:
+        main(["--unifloral", str(tmp_path)])
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "pip install distrax" in err[0]
