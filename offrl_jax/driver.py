@@ -201,7 +201,7 @@ class Driver:
         self.algo, self.seeds, self.batch_size, self.sweep = algo, tuple(seeds), batch_size, sweep
         values = tuple(sweep[1]) if sweep else (None,)
         self.members = tuple(s for _ in values for s in self.seeds)  # value-major: member j * S + i
-        self.layout = member_layout(len(self.members), devices, members)  # `members`: "map" / "vmap" (default: by platform)
+        self.layout = member_layout(len(self.members), devices, members)  # members: "map"/"vmap" (default: platform)
         pad = self.layout.padded - len(self.members)  # copies of the last member fill the last device
         if getattr(algo.cfg, "timeouts", "bootstrap") == "drop":  # CORL's loader: time-out rows are never sampled
             data = data | {"rows": jnp.asarray(np.flatnonzero(np.asarray(data["timeouts"]) == 0), jnp.int32)}

@@ -1,8 +1,9 @@
 """A run spread over 2 local CPU processes (`jax.distributed`, gloo collectives, a localhost coordinator) equals the
 same run in one process: same curves to float tolerance, one set of files written by process 0, and `--resume`
 (here extending the run) by two processes again.  Its 3 seeds do not divide over the 2 processes: the second
-pads its share with a copy of the last seed, and evaluates one seed fewer.  The first two-process part is started as `--processes 2` (the
-command starts its second process itself), the resume by hand (`--coordinator/--num-processes/--process-id`)."""
+pads its share with a copy of the last seed, and evaluates one seed fewer.  The first two-process part is started
+as `--processes 2` (the command starts its second process itself), the resume by hand
+(`--coordinator/--num-processes/--process-id`)."""
 from __future__ import annotations
 
 import csv
