@@ -322,7 +322,7 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
             built = replay(saved_studies(path.parent, path), args, given, typed)
         elif args.resume is None:
             built = build(args)  # validates every hyper-parameter and budget
-        use_cpu_cores(built if args.resume is None else saved_studies(args.resume))
+        use_cpu_cores()
         writer = start_processes(args)
         if writer:
             out, replace = output_dir(args, parser.prog.split(".")[-1])

@@ -15,19 +15,16 @@ import sys
 from pathlib import Path
 
 from offrl_jax.cli import UsageError
-from offrl_jax.study import Study
 from offrl_jax.workers import cpu_flags, process_cores
 
 
-def use_cpu_cores(built: Study | list[Study]) -> None:
-    """Give this process one single-threaded XLA device per core when a variant (or sweep group) has several members
-    to split over them.  A lone member keeps XLA's own thread pool, which gets more out of a second core for one
-    program (benchmarks/README.md, "One variant on both cores").  A GPU or TPU ignores these flags."""
+def use_cpu_cores() -> None:
+    """Give this process one single-threaded XLA device per core it may use, so that a variant's members split over
+    the cores (`offrl_jax.driver.member_layout`).  A lone member runs as fast as under XLA's own thread pool
+    (benchmarks/README.md, "One variant on both cores").  A GPU or TPU ignores these flags."""
     import jax._src.xla_bridge as xla_bridge
 
-    studies = built if isinstance(built, list) else [built]
-    most = max(len(s.seeds) * len(group) for s in studies for group, _ in s.groups())
-    if most > 1 and process_cores() > 1 and not xla_bridge.backends_are_initialized():
+    if process_cores() > 1 and not xla_bridge.backends_are_initialized():
         os.environ["XLA_FLAGS"] = cpu_flags(process_cores())
 
 

@@ -159,3 +159,27 @@ def test_unifloral_bad_checkout_is_one_line_and_exit_2(capsys, tmp_path, monkeyp
     assert exit_.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "pip install distrax" in err[0]
+
+
+def test_profile_counts_a_matmuls_flops_from_the_optimised_hlo():
+    import jax
+    import jax.numpy as jnp
+
+    from benchmarks.profile import dot_flops, parse_hlo, part_of
+
+    text = jax.jit(lambda x, w: jnp.tanh(x @ w)).lower(jnp.ones((4, 8)), jnp.ones((8, 16))).compile().as_text()
+    hlo = parse_hlo(text)
+    entry = [name for name, ins in hlo.items() if ins["computation"].startswith("main")]  # the ops a trace shows
+    matmuls = [name for name in entry if part_of(hlo, name) == "matmul"]
+    assert matmuls and sum(dot_flops(hlo, n) for n in matmuls) == 2 * 4 * 8 * 16
+
+
+def test_profile_attributes_a_td3bc_update(capsys):
+    from benchmarks.profile import main
+
+    assert main(["--updates", "20", "--transitions", "2000", "--json"]) == 0
+    result = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    parts = {r["part"]: r for r in result["parts"]}
+    assert {"matmul", "layernorm"} <= set(parts)
+    assert abs(sum(r["share"] for r in result["parts"]) - 1) < 1e-6
+    assert parts["matmul"]["gflops"] > 0 and result["updates"] == 20

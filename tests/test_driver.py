@@ -7,11 +7,11 @@ from offrl_jax.algos import make_algorithm, make_config
 from offrl_jax.driver import Driver, device_data
 
 
-def run(ds, algo_name, seeds, total=400, chunk=100, **overrides):
+def run(ds, algo_name, seeds, total=400, chunk=100, members=None, **overrides):
     config = make_config(algo_name, ds.env, **overrides)
     algo = make_algorithm(config, ds.obs_dim, ds.act_dim, len(ds))
     data, _ = device_data(ds, config.gamma)
-    chunks = list(Driver(algo, data, seeds, batch_size=32).run(algo.phases(total), chunk))
+    chunks = list(Driver(algo, data, seeds, batch_size=32, members=members).run(algo.phases(total), chunk))
     return algo, chunks
 
 
@@ -111,8 +111,11 @@ def test_vmapped_seed_stays_within_a_bound_of_the_single_run_over_3000_updates(t
     rounding level instead of growing: measured at 3.5e-6 of the largest parameter (1k, 3k and 4k updates alike) on
     the 2-core CI machine.  The bound below is 30x that."""
     kw = dict(pretrain="actor+critic", pretrain_updates=1000, hidden=(32, 32))
-    _, vmapped = run(tiny_dataset, "td3bc", (0, 1, 2), total=3000, chunk=1000, **kw)
+    _, vmapped = run(tiny_dataset, "td3bc", (0, 1, 2), total=3000, chunk=1000, members="vmap", **kw)  # a GPU's layout
     _, single = run(tiny_dataset, "td3bc", (1,), total=3000, chunk=1000, **kw)
+    _, mapped = run(tiny_dataset, "td3bc", (0, 1, 2), total=3000, chunk=1000, members="map", **kw)  # the CPU's
+    for m, s in zip(jax.tree.leaves(mapped[-1].states), jax.tree.leaves(single[-1].states)):
+        np.testing.assert_allclose(m[1], s[0], rtol=1e-6, atol=1e-7)
     gaps = [float(np.max(np.abs(v[1] - s[0])) / np.max(np.abs(s[0])))
             for v, s in zip(jax.tree.leaves(vmapped[-1].states), jax.tree.leaves(single[-1].states))]
     assert max(gaps) < 1e-4, max(gaps)
