@@ -102,9 +102,9 @@ def run_args(parser: argparse.ArgumentParser, updates: int | None, eval_every: i
                         "run flags and single-valued hyper-parameter flags given with it change that one value "
                         "(for every variant)")
     g.add_argument("--parallel", type=positive_int, default=2,
-                   help="variants trained at once (default %(default)s: one XLA program at these sizes keeps about "
-                        "one CPU core busy); on the CPU each in a process pinned to its own core(s), on a GPU in "
-                        "threads; 1 = one after another")
+                   help="variants trained at once (default %(default)s); on the CPU each in a process pinned to its "
+                        "own core(s), on a GPU in threads; 1 = one after another, each splitting its seeds over "
+                        "every core")
     g.add_argument("--no-progress", action="store_true",
                    help="no progress bar: one plain line per evaluation instead (for batch logs)")
     m = parser.add_argument_group("many processes or hosts (jax.distributed; offrl_jax/distributed.py)")

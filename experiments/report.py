@@ -95,6 +95,7 @@ def main(argv=None) -> int:
             check_writable_dir(args.merge)
             merge_runs(args.dirs, args.merge)
             args.dirs = [args.merge]
+        study_dirs = []  # every study whose summary made a table: what --plot draws
         for d in args.dirs:
             for path in summaries(d):
                 try:
@@ -104,13 +105,8 @@ def main(argv=None) -> int:
                 print(f"### {path.parent}\n\n{text}\n")
                 if args.curves:
                     print(curve_table(path.parent / "curves.csv") + "\n")
+                study_dirs.append(path.parent)
         if args.plot is not None:
-            study_dirs = [path.parent for d in args.dirs for path in summaries(d)]
-            for d in study_dirs:
-                try:
-                    table(read_summary(d / "summary.json"))
-                except (KeyError, TypeError, IndexError) as e:
-                    raise ValueError(f"{d / 'summary.json'}: not a run's summary (missing or empty {e})") from None
             written = plot_studies(study_dirs, args.plot, reference=not args.no_reference, overlay=args.overlay)
             print(f"figure: {', '.join(map(str, written))}", file=sys.stderr)
     except (OSError, ValueError, KeyError, IndexError) as e:

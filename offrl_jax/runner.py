@@ -55,14 +55,14 @@ def run_study(study: Study, out_dir: Path, dataset: Dataset, resume: bool = Fals
     """Run (or resume) every variant; write results as it goes; return the summary.
 
     Variants that differ only in one sweepable hyper-parameter (`sweep_groups`) train as one vmapped program unless
-    `study.vmap_sweeps` is off.  `parallel` > 1 runs that many variants (or groups) at once: at these network sizes
-    one XLA program keeps about one CPU core busy.  On the CPU they run in worker processes pinned to their own
-    cores (`offrl_jax.workers`, 10-20 % faster than threads on 2 cores); elsewhere (one GPU), or with
-    `processes=False`, in threads of this process (a jitted chunk releases the GIL).  Results do not depend on
-    either (each variant's randomness is its own).  `logger` ("tensorboard" or "wandb") also sends every
-    evaluation's scores and metrics there (`offrl_jax.loggers`); curves.csv stays the record.  `data_sha256`: the
-    dataset's `fingerprint`, where the caller has computed it already; `verify` False skips the resume check for a
-    caller that has just made it (the command line checks every study before the first one starts).
+    `study.vmap_sweeps` is off. `parallel` > 1 runs that many variants (or groups) at once. On the CPU they run in
+    worker processes pinned to their own cores (`offrl_jax.workers`, 10-20 % faster than threads on 2 cores);
+    elsewhere (one GPU), or with `processes=False`, in threads of this process (a jitted chunk releases the GIL).
+    Results do not depend on either (each variant's randomness is its own). `logger` ("tensorboard" or "wandb") also
+    sends every evaluation's scores and metrics there (`offrl_jax.loggers`); curves.csv stays the record.
+    `data_sha256`: the dataset's `fingerprint`, where the caller has computed it already; `verify` False skips the
+    resume check for a caller that has just made it (the command line checks every study before the first one
+    starts).
     """
     data_sha256 = data_sha256 or fingerprint(dataset)  # given by a caller that has it (~0.3 s per 1M rows)
     if resume and verify:  # before anything is written: the checkpoints must belong to this study and this data

@@ -1,8 +1,8 @@
 """Variants trained at once in worker processes, each pinned to its own CPU core(s).
 
-At these network sizes one XLA program keeps about one core busy, so `--parallel 2` trains two variants at once.
-On the idle 2-core machine, two processes each pinned to one core with single-threaded XLA ran 10-20 % more
-updates per second than two threads of one process (benchmarks/README.md, "Two variants at once").  Results do
+`--parallel 2` trains two variants at once, each on its own core(s) with one single-threaded XLA device per core
+(`cpu_flags`).  On the idle 2-core machine, two processes each pinned to one core ran 10-20 % more updates per
+second than two threads of one process (benchmarks/README.md, "Two variants at once").  Results do
 not depend on where a variant runs: each variant's randomness is its own.
 
 A worker gets its task by pickling (the dataset included), runs `target(*task, bar, recorder)` and sends back, on
