@@ -181,10 +181,13 @@ def main(argv=None) -> int:
     p.add_argument("--updates", type=positive_int, default=1000, help="updates in the traced chunk (default 1000)")
     p.add_argument("--transitions", type=positive_int, default=100_000, help="rows of the synthetic dataset")
     p.add_argument("--json", action="store_true", help="one JSON object on stdout instead of the table")
-    p.add_argument("--out", help="also write the JSON object to results/benchmarks/OUT.jsonl")
+    p.add_argument("--out", help="also append the JSON object to results/benchmarks/OUT.jsonl (or OUT if a path)")
     args = p.parse_args(argv)
     if args.num_critics != 10 and args.algo != "edac":
         p.error("--num-critics is EDAC's ensemble size; TD3+BC has two critics")
+    from benchmarks.throughput import results_path
+
+    out_path = results_path(p, args.out)  # checked writable before the work
     print(f"compiling and tracing {args.algo} ...", file=sys.stderr, flush=True)
     result = profile(args.algo, args.num_critics, args.transitions, args.updates)
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
@@ -192,12 +195,10 @@ def main(argv=None) -> int:
                " ".join(sys.argv[1:] if argv is None else argv), "commit": commit or None,
                "date": time.strftime("%Y-%m-%dT%H:%M:%S")}
     print(json.dumps(result) if args.json else table(result))
-    if args.out:
-        path = Path("results/benchmarks") / f"{args.out}.jsonl"
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with path.open("a") as f:
+    if out_path is not None:
+        with out_path.open("a") as f:
             f.write(json.dumps(result) + "\n")
-        print(f"wrote {path}", file=sys.stderr)
+        print(f"wrote {out_path}", file=sys.stderr)
     return 0
 
 

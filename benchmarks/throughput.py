@@ -247,6 +247,21 @@ def time_case(case: Case, seeds: int, data: dict[str, jax.Array], all_states, pe
     }
 
 
+def results_path(parser: argparse.ArgumentParser, out: str | None) -> Path | None:
+    """Where `--out NAME` writes: results/benchmarks/NAME.jsonl (NAME itself if it has a folder or a suffix), checked
+    writable before any work (one line and exit 2 otherwise); None without --out."""
+    if not out:
+        return None
+    path = Path(out)
+    if path.parent == Path("."):
+        path = RESULTS_DIR / (path.name if path.suffix else f"{path.name}.jsonl")
+    try:
+        check_writable_file(path)
+    except OSError as e:
+        parser.error(str(e))
+    return path
+
+
 def machine() -> str:
     cpu = platform.processor() or platform.machine()
     try:
@@ -354,15 +369,7 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
             chosen = [f"{flag} {' '.join(map(str, v))}" for flag, v in
                       (("--algo", args.algo), ("--phase", args.phase), ("--num-critics", args.num_critics)) if v]
             p.error(f"no case matches {' '.join(chosen)} (the cases: {', '.join(c.label for c in CASES)})")
-    out_path = None
-    if args.out:
-        out_path = Path(args.out)
-        if out_path.parent == Path("."):
-            out_path = RESULTS_DIR / (out_path.name if out_path.suffix else f"{out_path.name}.jsonl")
-        try:
-            check_writable_file(out_path)
-        except OSError as e:
-            p.error(str(e))
+    out_path = results_path(p, args.out)
 
     meta = {"command": " ".join([Path(sys.executable).name, "-m", "benchmarks.throughput", *sys.argv[1:]]),
             "date": datetime.datetime.now().isoformat(timespec="seconds"), "machine": machine(),

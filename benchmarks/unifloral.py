@@ -48,12 +48,11 @@ import flax.linen
 import jax
 import jax.numpy as jnp
 
-from benchmarks.throughput import ACT_DIM, BATCH, OBS_DIM, synthetic_data
+from benchmarks.throughput import ACT_DIM, BATCH, OBS_DIM, results_path, synthetic_data
 from offrl_jax.algos import make_algorithm, make_config
-from offrl_jax.cli import OneLineParser, check_writable_file, positive_int
+from offrl_jax.cli import OneLineParser, positive_int
 from offrl_jax.driver import CHUNK, INIT, make_chunk_fn, member_layout, seed_keys
 
-RESULTS_DIR = Path("results/benchmarks")
 MODULE = "unifloral_td3_bc"  # the name their imported td3_bc.py gets in sys.modules
 
 
@@ -196,15 +195,7 @@ def main(argv: list[str] | None = None) -> dict:
         p.error(f"--updates {args.updates} must be even (one TD3+BC step = 2 critic updates)")
     if importlib.util.find_spec("distrax") is None:
         p.error("unifloral's td3_bc.py imports distrax, which is not installed: pip install distrax")
-    out_path = None
-    if args.out:
-        out_path = Path(args.out)
-        if out_path.parent == Path("."):
-            out_path = RESULTS_DIR / (out_path.name if out_path.suffix else f"{out_path.name}.jsonl")
-        try:
-            check_writable_file(out_path)
-        except OSError as e:
-            p.error(str(e))
+    out_path = results_path(p, args.out)
 
     jax.devices()  # the backend starts now, with the caller's XLA_FLAGS, whatever their import sets
     try:
