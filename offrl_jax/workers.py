@@ -112,13 +112,15 @@ def portable_error(e: BaseException) -> BaseException:
         return kind(f"{type(e).__name__}: {e}")
 
 
-def _worker(index: int, target: Callable, task: tuple, cores: list[int], conn, stop, parent: int) -> None:
+def _worker(index: int, target: Callable, tasks, cores: list[int], conn, stop, parent: int) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides when to stop (see the module doc)
     _die_with_parent()
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, cores)
     os.environ["XLA_FLAGS"] = cpu_flags(len(cores))  # before JAX starts its backend
     try:
+        task = tasks.recv()  # the task (the dataset with it) comes on its own pipe, after the start
+        tasks.close()
         result = target(*task, _Bar(conn), _Recorder(conn, _Stop(stop, parent)))
         conn.send(("done", result))
     except BaseException as e:  # noqa: BLE001 -- every error goes to the parent, which decides
@@ -206,12 +208,19 @@ def run_in_processes(target: Callable, tasks: list[tuple], parallel: int, bar, r
                 index, task = pending.pop(0)
                 cores = free.pop(0)
                 receive, send = ctx.Pipe(duplex=False)
-                process = ctx.Process(target=_worker, args=(index, target, task, cores, send, stop, os.getpid()),
-                                      daemon=True)
+                task_receive, task_send = ctx.Pipe(duplex=False)
+                process = ctx.Process(target=_worker, args=(index, target, task_receive, cores, send, stop,
+                                                            os.getpid()), daemon=True)
                 with _sigint_ignored():  # inherited: the worker ignores Ctrl-C from its first instruction
-                    process.start()
+                    process.start()  # quick: only small arguments (a big one would hold Ctrl-C off until the
+                    # worker has imported its modules and read it)
                 send.close()  # the worker holds the only writing end: its death closes the pipe
+                task_receive.close()
                 running[index] = (process, receive, cores)
+                try:
+                    task_send.send(task)  # Ctrl-C here is seen at once; the worker then reads a closed pipe
+                finally:
+                    task_send.close()
             ready = wait([conn for _, conn, _ in running.values()], timeout=1.0)
             for index in [i for i, (_, conn, _) in list(running.items()) if conn in ready]:
                 serve(index)
