@@ -388,3 +388,15 @@ def test_zero_byte_npz_names_the_file(tmp_path):
     with pytest.raises(DatasetError) as err:
         read_door_npz(path)
     assert_one_line(err, path, "not a .npz file")
+
+
+def test_an_npz_with_d4rl_keys_clips_its_actions_when_asked(tmp_path):
+    arrays = d4rl_arrays()
+    arrays["actions"][3, 1] = 1.5
+    path = tmp_path / "oob.npz"
+    np.savez(path, **arrays)
+    with pytest.raises(DatasetError, match="clip_actions"):
+        load_dataset_path(path)  # refused by default, as a D4RL file is
+    with pytest.warns(UserWarning, match="clipped"):
+        ds = load_dataset_path(path, clip_actions=True)
+    assert ds.actions.max() <= 1.0

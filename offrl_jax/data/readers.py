@@ -316,16 +316,17 @@ def door_dims(data: dict) -> bool:
             and np.ndim(data["actions"]) == 2 and np.shape(data["actions"])[1] == spec.act_dim)
 
 
-def read_door_npz(path, env: str = "door", clip_actions: bool = True) -> Dataset:
+def read_door_npz(path, env: str = "door", clip_actions: bool | None = None) -> Dataset:
     """Adroit demonstrations as .npz: observations (T, o), actions (T, a), rewards (T,), episode_lengths (E,) with
     sum T.  An .npz with D4RL's keys instead (observations, actions, rewards, terminals, optional timeouts and
     next_observations) is read as a D4RL file (`d4rl_arrays_to_dataset`; the env inferred from its dims unless
     they are door's or `env` is given).  The last step of each trajectory is a time-out with no recorded successor,
     so next_observations is the next row within a trajectory and the row itself at its end; there are no terminals.
 
-    `clip_actions` defaults to True here: the door human demonstrations (the same transitions as D4RL's door-human)
-    contain ~10k action values slightly beyond [-1, 1] (max |a| ~ 1.37), and the Adroit envs clip every action to
-    [-1, 1] before applying it, so clipping changes no transition; a warning states how many values were clipped.
+    `clip_actions` None means True for demonstrations and False for an .npz with D4RL's keys.  The door human
+    demonstrations (the same transitions as D4RL's door-human) contain ~10k action values slightly beyond [-1, 1]
+    (max |a| ~ 1.37), and the Adroit envs clip every action to [-1, 1] before applying it, so clipping changes no
+    transition; a warning states how many values were clipped.
     """
     path = Path(path)
     _require_file(path)
@@ -342,7 +343,7 @@ def read_door_npz(path, env: str = "door", clip_actions: bool = True) -> Dataset
         raise DatasetError(f"{path}: not a readable .npz file ({e or type(e).__name__})") from None
     if "episode_lengths" not in data and all(k in data for k in D4RL_REQUIRED):  # an .npz with D4RL's keys
         return d4rl_arrays_to_dataset(path, data, None if env == "door" and not door_dims(data) else env,
-                                      clip_actions=False)
+                                      clip_actions=bool(clip_actions))
     for key in ("observations", "actions", "rewards", "episode_lengths"):
         if key not in data:
             raise DatasetError(f"{path}: missing key '{key}' (found: {', '.join(sorted(data)) or 'none'})")
@@ -360,7 +361,7 @@ def read_door_npz(path, env: str = "door", clip_actions: bool = True) -> Dataset
     nxt = next_within_episode(obs, timeouts > 0) if obs.ndim == 2 else obs
     ds = Dataset(obs, data["actions"], data["rewards"], nxt, np.zeros_like(timeouts), timeouts,
                  name=path.stem, source=str(path))
-    return validate(ds, path, env=env, clip_actions=clip_actions)
+    return validate(ds, path, env=env, clip_actions=True if clip_actions is None else clip_actions)
 
 
 # ------------------------------------------------------------------------------------------------------ dispatch
