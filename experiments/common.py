@@ -289,7 +289,7 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
     they make ({config field: value}, None for a flag not given)."""
     args = parser.parse_args(argv)
     one_line_warnings()
-    out, replace, lock, local, ok = None, False, None, None, False
+    out, replace, lock, local, ok, code = None, False, None, None, False, 1
     try:
         given = given_dests(parser, argv)
         if args.logger is not None:  # its writer must be there before anything is written
@@ -373,11 +373,13 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
         if os.environ.get("OFFRL_JAX_DEBUG") == "1":  # the traceback, for whoever is debugging the code
             raise
         print_error(e)
-        return 3 if isinstance(e, Diverged) else 2
+        code = 3 if isinstance(e, Diverged) else 2
+        return code
     except KeyboardInterrupt:
         where = f"; resume with --resume {out}" if out is not None and (out / "config.json").is_file() else ""
         print(f"interrupted{where}", file=sys.stderr)
-        return 130
+        code = 130
+        return code
     finally:
         failed = local.close(ok) if local is not None else None  # the other processes of a --processes run
         # a claimed timestamped directory that got nothing (the data failed to load) is not left behind,
@@ -393,6 +395,10 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
                     empty.rmdir()  # only if empty
                 except OSError:
                     break
+        if local is not None and not ok:  # leave now: JAX's exit handler would wait for the processes just stopped
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(code)
     if failed is not None:
         print_error(failed)
         return 2

@@ -32,6 +32,9 @@ def start_processes(args) -> bool:
     """Join the other processes of a multi-process run if the flags ask for one; returns whether this process
     writes the run's files (process 0, or the only one)."""
     manual = (args.coordinator, args.num_processes, args.process_id)
+    if args.processes > process_cores():
+        raise UsageError(f"--processes {args.processes}: this command may use {process_cores()} core(s), one process "
+                         "each at most")
     if args.processes > 1 and (args.distributed or any(x is not None for x in manual)):
         raise UsageError("--processes starts its own processes on this machine; --distributed and --coordinator "
                          "join processes started elsewhere: give one or the other")

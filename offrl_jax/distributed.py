@@ -46,6 +46,7 @@ class LocalProcesses:
 
     def __init__(self, n: int, module: str, argv: list[str]):
         self.n, self.module, self.argv, self.procs, self.logs = n, module, list(argv), [], []
+        self.closing = False  # set by `close`: the processes it stops are not failures to report
 
     def start(self) -> None:
         import os
@@ -94,7 +95,9 @@ class LocalProcesses:
 
         while any(p.poll() is None for p in self.procs):
             time.sleep(1.0)
-            if (why := self._failure()) is not None:
+            if self.closing:
+                return
+            if (why := self._failure()) is not None and not self.closing:
                 print(f"error: {why}", file=sys.stderr, flush=True)
                 for p in self.procs:
                     p.terminate()
@@ -102,6 +105,7 @@ class LocalProcesses:
 
     def close(self, ok: bool) -> str | None:
         """Wait for the other processes (stop them if this one failed); the reason one of them failed, if any."""
+        self.closing = not ok
         if ok:  # leave together: each process's exit waits at a shutdown barrier that this one must reach too
             try:
                 jax.distributed.shutdown()
@@ -111,9 +115,10 @@ class LocalProcesses:
             if not ok:
                 p.terminate()
             try:
-                p.wait(timeout=60)
+                p.wait(timeout=60 if ok else 5)  # a process waiting in JAX's start-up may not heed SIGTERM
             except Exception:  # noqa: BLE001 -- a process that does not end is stopped
                 p.kill()
+                p.wait()
         return self._failure() if ok else None
 
 

@@ -78,3 +78,20 @@ def test_process_zero_writes_one_set_of_files(runs):
     assert [s["variant"] for s in summary] == ["pretrained"]
     assert sorted(p.name for p in (two / "checkpoints").iterdir()) == ["pretrained.best.msgpack", "pretrained.msgpack"]
     assert len(json.loads((two / "config.json").read_text())["runs"]) == 2  # the start and the resume
+
+
+def test_a_local_run_that_fails_is_one_line_and_leaves_nothing(tmp_path):
+    """Bad data with --processes 2: the other process is stopped, one line, exit 2, no lock file left behind."""
+    result = subprocess.run([sys.executable, "-m", "experiments.mujoco_medium", "--processes", "2", "--out",
+                             str(tmp_path / "run"), "--dataset-path", str(tmp_path / "missing.npz"), *TINY],
+                            cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 2 and result.stderr.strip().splitlines() == [
+        f"error: {tmp_path / 'missing.npz'}: no such file"], result.stderr[-2000:]
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_more_processes_than_cores_is_refused(tmp_path):
+    result = subprocess.run([sys.executable, "-m", "experiments.mujoco_medium", "--processes", "1000", "--out",
+                             str(tmp_path / "run"), *TINY], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 2 and "--processes 1000: this command may use" in result.stderr
+    assert list(tmp_path.iterdir()) == []
