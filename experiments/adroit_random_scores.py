@@ -48,8 +48,8 @@ def random_returns(env_name: str, episodes: int, seed: int) -> tuple[np.ndarray,
 def main(argv=None) -> int:
     ap = OneLineParser(prog="experiments.adroit_random_scores", description=__doc__,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--episodes", type=int_at_least(2), default=100, help="episodes per env (>= 2, for a standard "
-                    "error; default %(default)s)")
+    ap.add_argument("--episodes", type=int_at_least(2, 1_000_000), default=100,
+                    help="episodes per env (2 to 1e6: 2 for a standard error; default %(default)s)")
     ap.add_argument("--envs", nargs="+", choices=tuple(PAPER_TABLE4), default=list(PAPER_TABLE4))
     ap.add_argument("--seed", type=seed_int, default=0)
     ap.add_argument("--out", type=Path, default=None)

@@ -20,7 +20,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from experiments.launch import start_local_processes, start_processes, use_cpu_cores
+from experiments.launch import check_backend, start_local_processes, start_processes, use_cpu_cores
 from offrl_jax import datasets
 from offrl_jax.checkpoint import atomic_write_text
 from offrl_jax.cli import (  # noqa: F401  (OneLineParser, positive_int, UsageError: re-exported, the studies import them here)
@@ -324,6 +324,8 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
             built = build(args)  # validates every hyper-parameter and budget
         use_cpu_cores()
         writer = start_processes(args)
+        if args.processes <= 1:  # a --processes run starts its backend once the others are started
+            check_backend()
         if writer:
             out, replace = output_dir(args, parser.prog.split(".")[-1])
             check_writable_dir(out)  # before any data is loaded or generated

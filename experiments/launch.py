@@ -28,6 +28,19 @@ def use_cpu_cores() -> None:
         os.environ["XLA_FLAGS"] = cpu_flags(process_cores())
 
 
+def check_backend() -> None:
+    """Start JAX's backend now, before anything is written: a bad XLA_FLAGS (no devices, say) is one line here.
+    (An unknown flag still ends the process inside XLA, but nothing has been written yet.)"""
+    import jax
+
+    try:
+        jax.devices()
+    except RuntimeError as e:
+        first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+        raise UsageError(f"JAX could not start ({first[:200]}); XLA_FLAGS={os.environ.get('XLA_FLAGS', '')!r}") \
+            from None
+
+
 def start_processes(args) -> bool:
     """Join the other processes of a multi-process run if the flags ask for one; returns whether this process
     writes the run's files (process 0, or the only one)."""

@@ -61,16 +61,18 @@ def seed_int(text: str) -> int:
     return value
 
 
-def int_at_least(low: int, high: int | None = None) -> Callable[[str], int]:
-    where = f">= {low}" if high is None else f"in [{low}, {high}]"
+def int_at_least(low: int, high: int = COUNT_MAX) -> Callable[[str], int]:
+    """An integer in [low, high] (by default below 2**31, as every count is)."""
+    where = f">= {low}" if high == COUNT_MAX else f"in [{low}, {high}]"
 
     def convert(text: str) -> int:
         try:
             value = int(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"expected an integer {where}, got {text!r}") from None
-        if value < low or (high is not None and value > high):
-            raise argparse.ArgumentTypeError(f"expected an integer {where}, got {text!r}")
+        if value < low or value > high:
+            bound = " below 2**31" if high == COUNT_MAX and value > high else ""
+            raise argparse.ArgumentTypeError(f"expected an integer {where}{bound}, got {text!r}")
         return value
     return convert
 

@@ -69,7 +69,10 @@ def merge_runs(run_dirs: list[Path], out_dir: Path) -> list[dict]:
     for d in run_dirs:
         if not (d / "config.json").exists() or not (d / "curves.csv").exists():
             raise FileNotFoundError(f"{d}: not a run directory (config.json and curves.csv expected)")
-        studies.append(Study.from_json((d / "config.json").read_text()))
+        try:
+            studies.append(Study.from_json((d / "config.json").read_text()))
+        except ValueError as e:
+            raise ValueError(f"{d / 'config.json'}: {e}") from None
     own = ("variants", "reference", "checkpoint_every", "keep_checkpoints")
     shared = [{k: v for k, v in dataclasses.asdict(s).items() if k not in own} for s in studies]
     for d, fields in zip(run_dirs[1:], shared[1:]):

@@ -72,7 +72,10 @@ def run_study(study: Study, out_dir: Path, dataset: Dataset, resume: bool = Fals
         parallel = 1  # every process runs the groups in the same order
     config_path = out_dir / "config.json"  # a resumed multi-study run may not have begun this study yet
     previous = config_path.read_text() if resume and config_path.exists() else None
-    record = study.record_json(dataset, previous, data_sha256)
+    try:
+        record = study.record_json(dataset, previous, data_sha256)
+    except ValueError as e:
+        raise ValueError(f"{config_path}: {e}") from None
     if writer:
         out_dir.mkdir(parents=True, exist_ok=True)
     if logger is not None and writer:  # a logger that cannot start (no wandb login, ...) is a warning: the run goes on

@@ -125,12 +125,22 @@ class Study:
                     data_sha256: str | None = None) -> str:
         """config.json: the study, its resolved configs, and the run records so far plus this one."""
         runs = json.loads(previous).get("runs", []) if previous else []
+        if not isinstance(runs, list) or not all(isinstance(r, dict) for r in runs):
+            raise ValueError("'runs' must be a list of run records (objects)")
         raw = dataclasses.asdict(self) | {"resolved": self.resolved(),
                                           "runs": runs + [run_record(ds, self.dataset, data_sha256)]}
         return json.dumps(raw, indent=2, default=list) + "\n"
 
     @staticmethod
     def from_json(text: str) -> Study:
+        """The study saved in a config.json's text; ValueError if it is not one (any structural problem)."""
+        try:
+            return Study._from_json(text)
+        except (KeyError, TypeError, AttributeError, IndexError) as e:
+            raise ValueError(f"not a saved study ({type(e).__name__}: {e})") from None
+
+    @staticmethod
+    def _from_json(text: str) -> Study:
         raw = json.loads(text)
         for recorded in ("resolved", "runs"):  # what the run wrote about itself; the study is the rest
             raw.pop(recorded, None)
