@@ -56,9 +56,12 @@ class Policy:
             bad = np.argwhere(~np.isfinite(obs.reshape(-1, self.obs_dim)))[0]
             raise ValueError(f"observation {bad[0]} has a non-finite value (index {bad[1]}): the policy would "
                              "return non-finite actions")
-        if obs.ndim == 1:
-            return np.asarray(self.act(obs[None]))[0]
-        return np.asarray(self.act(obs))
+        actions = np.asarray(self.act(obs[None] if obs.ndim == 1 else obs))
+        if not np.isfinite(actions).all():
+            bad = int(np.argwhere(~np.isfinite(actions))[0][0])
+            raise ValueError(f"the policy's action for observation {bad} is not finite (an observation far outside "
+                             "the training data's range, or a checkpoint whose parameters diverged)")
+        return actions[0] if obs.ndim == 1 else actions
 
     def export(self, path: str | Path, platforms: tuple[str, ...] | None = None) -> Path:
         """Write the policy as a serialized `jax.export` function: float32 (b, obs_dim) -> (b, act_dim), for the
@@ -87,6 +90,8 @@ def load_policy(run_dir: str | Path, variant: str | None = None, seed: int | Non
     run saved in `run_dir`: its last checkpoint, with checkpoint="best" the one taken at the variant's best
     seed-mean evaluation, or with an update number one kept by `keep_checkpoints`.  Raises ValueError (one line)
     for a run, variant, seed or checkpoint that is not there."""
+    seed = int(seed) if isinstance(seed, np.integer) else seed  # numpy integers are integers
+    checkpoint = int(checkpoint) if isinstance(checkpoint, np.integer) else checkpoint
     if checkpoint not in ("last", "best") and (isinstance(checkpoint, bool) or not isinstance(checkpoint, int)):
         raise ValueError(f"checkpoint must be 'last', 'best' or an update number, not {checkpoint!r}")
     if isinstance(checkpoint, int) and checkpoint < 0:

@@ -44,6 +44,16 @@ def read_curves(path: Path) -> list[dict]:
                              if v != ""})
         except (ValueError, TypeError) as e:
             raise ValueError(f"{path}: not a curves.csv of this project ({e})") from None
+    seeds: dict[str, set] = {}  # every evaluation holds every seed of its variant: a file cut at a line is refused
+    at: dict[tuple, set] = {}
+    for r in rows:
+        if "variant" in r and "seed" in r and "update" in r:
+            seeds.setdefault(r["variant"], set()).add(r["seed"])
+            at.setdefault((r["variant"], r["update"]), set()).add(r["seed"])
+    for (variant, update), have in at.items():
+        if seeds[variant] - have:
+            raise ValueError(f"{path}: {variant} at update {update} has no row for seed(s) "
+                             f"{', '.join(map(str, sorted(seeds[variant] - have)))} (a truncated or edited file?)")
     return rows
 
 
@@ -85,7 +95,15 @@ def merge_runs(run_dirs: list[Path], out_dir: Path) -> list[dict]:
         raise ValueError(f"the runs name different reference variants: {', '.join(references)}")
     reference = references[0] if references else None
     study = dataclasses.replace(studies[0], variants=variants, reference=reference)  # checks labels are unique
-    rows = [r for d in run_dirs for r in read_curves(d / "curves.csv")]
+    rows = []
+    for d, s in zip(run_dirs, studies):
+        mine = read_curves(d / "curves.csv")
+        last = {v.label: max((r["update"] for r in mine if r.get("variant") == v.label), default=0) for v in s.variants}
+        short = {label: u for label, u in last.items() if u < s.updates - 1}  # TD3 may trim an odd budget by 1
+        if short:
+            raise ValueError(f"{d / 'curves.csv'}: ends before the run's {s.updates:,} updates ("
+                             f"{', '.join(f'{label} at {u:,}' for label, u in short.items())}); merge finished runs")
+        rows += mine
     ends = pretrain_ends_of(rows)
     summary = summarize(study, rows, ends)
     out_dir.mkdir(parents=True, exist_ok=True)

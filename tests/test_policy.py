@@ -90,6 +90,7 @@ def test_one_observation_or_a_batch(run):
     (np.zeros(7), r"shaped \(7,\)"),
     (np.zeros((2, 3, 11)), r"shaped \(2, 3, 11\)"),
     ([["a"] * 11], "must be numbers"),
+    (np.full(11, 3e38), "action for observation 0 is not finite"),
 ])
 def test_bad_observations_are_refused_not_acted_on(run, obs, message):
     policy = load_policy(run)

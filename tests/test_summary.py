@@ -219,3 +219,18 @@ def test_a_truncated_curves_csv_is_refused_not_read_short(tmp_path):
         read_curves(path)
     path.write_text("variant,seed,update,score,critic_loss\na,0,100,1.5,2.0\na,0,200,1.7,\n")
     assert [r.get("critic_loss") for r in read_curves(path)] == [2.0, None]  # an empty cell is a metric not logged
+    path.write_text("variant,seed,update,score\na,0,100,1.5\na,1,100,1.6\na,0,200,1.7\n")  # cut at a line
+    with pytest.raises(ValueError, match="a at update 200 has no row for seed"):
+        read_curves(path)
+
+
+def test_merge_refuses_a_run_whose_curves_end_early(tmp_path, capsys):
+    from experiments import report
+
+    common = dict(name="t", dataset="hopper-medium", env="hopper", seeds=(0,), updates=200, eval_every=100)
+    scratch = (Variant.of("scratch", "td3bc", pretrain="none"),)
+    run = _run_dir(tmp_path / "a", Study(variants=scratch, reference="scratch", **common),
+                   [{"variant": "scratch", "algo": "td3bc", "seed": 0, "phase": "offline_rl", "update": 100,
+                     "seconds": 1.0, "score": 1.0}])
+    assert report.main(["--merge", str(tmp_path / "m"), str(run)]) == 2
+    assert "ends before the run's 200 updates (scratch at 100)" in capsys.readouterr().err
