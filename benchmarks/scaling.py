@@ -122,6 +122,9 @@ def main(argv=None) -> int:
                 print(json.dumps(rows[-1]), flush=True)
             else:
                 print(f"S = {seeds}: {case} {rows[-1]['updates_per_s']:.0f} updates/s", file=sys.stderr, flush=True)
+    if not rows:
+        print("error: no case could be measured (see the warnings above)", file=sys.stderr)
+        return 2
     if not args.json:
         unit = {r["seeds"]: r["updates_per_s"] for r in rows if r["case"] == "1core"}
         print("| S | case | updates/s (summed over seeds) | x 1-core |\n|--:|---|--:|--:|")

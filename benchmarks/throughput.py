@@ -250,8 +250,10 @@ def time_case(case: Case, seeds: int, data: dict[str, jax.Array], all_states, pe
 def results_path(parser: argparse.ArgumentParser, out: str | None) -> Path | None:
     """Where `--out NAME` writes: results/benchmarks/NAME.jsonl (NAME itself if it has a folder or a suffix), checked
     writable before any work (one line and exit 2 otherwise); None without --out."""
-    if not out:
+    if out is None:
         return None
+    if not out.strip():
+        parser.error("--out needs a name or a path")
     path = Path(out)
     if path.parent == Path("."):
         path = RESULTS_DIR / (path.name if path.suffix else f"{path.name}.jsonl")

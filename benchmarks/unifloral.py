@@ -200,7 +200,7 @@ def main(argv: list[str] | None = None) -> dict:
     jax.devices()  # the backend starts now, with the caller's XLA_FLAGS, whatever their import sets
     try:
         module = load_unifloral(args.unifloral, args.layer_norm)
-    except Exception as e:  # whatever their import raises: one line
+    except (Exception, SystemExit) as e:  # whatever their import raises (or exits with): one line
         p.error(f"{args.unifloral / 'algorithms' / 'td3_bc.py'}: cannot be imported ({type(e).__name__}: {e})")
     if module.Args().num_critic_updates_per_step != 2:
         p.error(f"their Args().num_critic_updates_per_step is {module.Args().num_critic_updates_per_step}, not 2: "

@@ -22,11 +22,23 @@ def print_error(message: object) -> None:
 
 
 class OneLineParser(argparse.ArgumentParser):
-    """argparse with a one-line error (argparse prints usage + error) and no prefix matching of flags ("--pretrain"
-    must not silently mean "--pretrain-updates")."""
+    """argparse with a one-line error (argparse prints usage + error), no prefix matching of flags ("--pretrain"
+    must not silently mean "--pretrain-updates"), and no repeated value in a list of choices ("--envs hopper
+    hopper" would train the same study twice)."""
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **{"allow_abbrev": False} | kwargs)
+
+    def parse_known_args(self, args=None, namespace=None):
+        parsed, extra = super().parse_known_args(args, namespace)
+        for action in self._actions:
+            values = getattr(parsed, action.dest, None)
+            if action.choices is not None and action.nargs in ("+", "*") and isinstance(values, list):
+                repeated = sorted({str(v) for v in values if values.count(v) > 1})
+                if repeated:
+                    self.error(f"argument {'/'.join(action.option_strings) or action.dest}: "
+                               f"{', '.join(repeated)} given more than once")
+        return parsed, extra
 
     def error(self, message: str):
         print_error(message)

@@ -203,3 +203,11 @@ def test_datasets_generate_refuses_an_existing_dataset_without_overwrite(tmp_pat
     (tmp_path / "file").write_text("x")
     assert "is a file" in _one_line_error("offrl_jax.datasets", "generate", "hopper-medium", "--out",
                                           str(tmp_path / "file"), "--overwrite")
+
+
+@pytest.mark.parametrize("module, args, message", [
+    ("experiments.figure2", ["--envs", "hopper", "hopper"], "argument --envs: hopper given more than once"),
+    ("experiments.replay", ["--levels", "medium-replay", "medium-replay"], "medium-replay given more than once"),
+])
+def test_a_choice_given_twice_is_refused(module, args, message):
+    assert message in _one_line_error(module, *args)
