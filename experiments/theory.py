@@ -158,6 +158,9 @@ def main(argv=None) -> int:
         except OSError as e:
             ap.error(str(e))
     rows = run(args.mdps, args.states, args.actions, args.gamma, args.eps, args.betas, args.delta, args.seed)
+    if met := sorted({r["eps"] for r in rows if r["delta"] >= r["err_zero"]}):  # before anything is written
+        ap.error(f"--eps {' '.join(map(str, met))}: the noise floor 2*eps/(1-gamma) is above the starting error "
+                 "||Q*||, so there is nothing to converge to; use a smaller eps")
     summary = table(rows)
     if args.out:
         args.out.mkdir(parents=True, exist_ok=True)

@@ -211,3 +211,8 @@ def test_datasets_generate_refuses_an_existing_dataset_without_overwrite(tmp_pat
 ])
 def test_a_choice_given_twice_is_refused(module, args, message):
     assert message in _one_line_error(module, *args)
+
+
+def test_theory_refuses_an_error_whose_noise_floor_hides_the_target():
+    assert "nothing to converge to" in _one_line_error("experiments.theory", "--mdps", "1", "--states", "5",
+                                                       "--eps", "5", "--betas", "0")
