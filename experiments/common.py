@@ -391,6 +391,11 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
         if lock is not None:
             Path(lock.name).unlink(missing_ok=True)
             lock.close()
+            for made in reversed(lock.created_dirs):  # parents of --out that the lock made, if nothing went there
+                try:
+                    made.rmdir()
+                except OSError:
+                    break
         if out is not None and args.out is None and args.resume is None:
             for empty in (out.parent, out.parent.parent):
                 try:

@@ -146,8 +146,10 @@ def lock_run_dir(path: Path):
     import fcntl
 
     path = Path(path).resolve()
+    created = [p for p in reversed(path.parents) if not p.exists()]  # made here, outermost first
     path.parent.mkdir(parents=True, exist_ok=True)
     handle = open(path.parent / f".{path.name}.lock", "a")  # noqa: SIM115  (kept open: it is the lock)
+    handle.created_dirs = created  # the caller removes them (if still empty) with the lock
     try:
         fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:

@@ -168,3 +168,11 @@ def test_throughput_refuses_flags_it_would_ignore_or_cannot_use(tmp_path, args, 
     (tmp_path / "keep.txt").write_text("mine\n")
     line = refused(tmp_path, "benchmarks.throughput", *args, "--out", tmp_path / "bench.jsonl")
     assert message in line, line
+
+
+def test_a_failed_run_leaves_no_folders_it_made_for_its_out(tmp_path):
+    out = tmp_path / "a" / "b" / "run"
+    result = subprocess.run([sys.executable, "-m", "experiments.mujoco_medium", "--out", str(out), "--dataset-path",
+                             str(tmp_path / "missing.hdf5")], capture_output=True, text=True, timeout=300,
+                            cwd=Path(__file__).resolve().parents[1])
+    assert result.returncode == 2 and list(tmp_path.iterdir()) == []
