@@ -46,9 +46,12 @@ class Policy:
         """Actions for raw observations (obs_dim,) or (B, obs_dim); a wrong shape or a NaN/inf observation raises
         ValueError (a non-finite input would give non-finite actions)."""
         try:
+            if np.iscomplexobj(obs):
+                raise TypeError
             obs = np.asarray(obs, np.float32)
         except (TypeError, ValueError):
-            raise ValueError(f"observations must be numbers, shaped ({self.obs_dim},) or (B, {self.obs_dim})") from None
+            raise ValueError(f"observations must be real numbers, shaped ({self.obs_dim},) or "
+                             f"(B, {self.obs_dim})") from None
         if obs.ndim not in (1, 2) or obs.shape[-1] != self.obs_dim:
             raise ValueError(f"observations shaped {obs.shape}; {self.env}'s policy takes ({self.obs_dim},) or "
                              f"(B, {self.obs_dim})")

@@ -142,8 +142,11 @@ class Study:
     @staticmethod
     def _from_json(text: str) -> Study:
         raw = json.loads(text)
-        for recorded in ("resolved", "runs"):  # what the run wrote about itself; the study is the rest
-            raw.pop(recorded, None)
+        resolved, runs = raw.pop("resolved", {}), raw.pop("runs", [])  # what the run wrote about itself
+        if not isinstance(resolved, dict) or not all(isinstance(c, dict) for c in resolved.values()):
+            raise ValueError("'resolved' must map each variant to its config (an object)")
+        if not isinstance(runs, list) or not all(isinstance(r, dict) for r in runs):
+            raise ValueError("'runs' must be a list of run records (objects)")
         if "transitions" in raw:  # runs saved before the cap was renamed
             raw["max_transitions"] = raw.pop("transitions")
         value = lambda x: tuple(x) if isinstance(x, list) else x  # noqa: E731  JSON has lists; configs use tuples

@@ -89,7 +89,8 @@ def test_one_observation_or_a_batch(run):
     (np.stack([np.zeros(11), np.r_[np.zeros(10), np.inf]]), "observation 1 has a non-finite value"),
     (np.zeros(7), r"shaped \(7,\)"),
     (np.zeros((2, 3, 11)), r"shaped \(2, 3, 11\)"),
-    ([["a"] * 11], "must be numbers"),
+    ([["a"] * 11], "must be real numbers"),
+    (np.full(11, 1 + 1j), "must be real numbers"),
     (np.full(11, 3e38), "action for observation 0 is not finite"),
 ])
 def test_bad_observations_are_refused_not_acted_on(run, obs, message):

@@ -1,4 +1,6 @@
 """Every study module builds the variants the paper's figure needs (no training here)."""
+import json
+
 import pytest
 
 from experiments import ablation, adroit_door, figure2, lambda_sweep, layernorm, mujoco_medium, qtransformer, replay
@@ -198,3 +200,13 @@ def test_every_sweepable_field_sweeps_from_the_command_line():
         assert [n for _, n in sweep_groups(study.variants)] == [name]
     (study,) = build(mujoco_medium, ["--algo", "edac", "--tau", "0.01", "0.02", "--pretrain", "none"])
     assert [n for _, n in sweep_groups(study.variants)] == ["tau"]
+
+
+@pytest.mark.parametrize("field, value", [("resolved", []), ("resolved", None), ("runs", {}), ("runs", "x")])
+def test_a_config_json_whose_records_have_the_wrong_shape_is_not_a_saved_study(field, value):
+    from offrl_jax.study import Study, Variant
+
+    study = Study(name="t", dataset="hopper-medium", env="hopper", variants=(Variant.of("a", "td3bc"),))
+    raw = json.loads(study.to_json()) | {field: value}
+    with pytest.raises(ValueError, match=f"'{field}' must"):
+        Study.from_json(json.dumps(raw))
