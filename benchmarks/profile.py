@@ -117,7 +117,7 @@ def program(algo_name: str, num_critics: int, transitions: int, updates: int):
     driver = Driver(algo, synthetic_data(transitions), (0,))
     phase = next(p for p in algo.phases(updates * 4) if p.name == "offline_rl")
     calls = max(1, updates // phase.updates_per_call)
-    states = driver.place(driver.init())
+    states = driver.layout.place(driver.init())
     fn = make_chunk_fn(phase, 256, calls, layout=driver.layout)
     compiled = fn.lower(states, driver.data, driver.run_keys, jnp.int32(0)).compile()
     return compiled, (states, driver.data, driver.run_keys), calls, phase.updates_per_call, jax

@@ -191,12 +191,8 @@ def time_case(case: Case, seeds: int, data: dict[str, jax.Array], all_states, pe
     predicted_s = calls * per_call * seeds / (expect_gflops * 1e9)
 
     layout = member_layout(seeds, mode=mode)  # as `Driver` places them; padded with copies of the last seed
-
-    def place(x):  # the first S members, padded; own buffers (donated)
-        x = np.asarray(x[:seeds])
-        return jax.device_put(np.concatenate([x, np.repeat(x[-1:], layout.padded - seeds, axis=0)]), layout.split)
-    states = jax.tree.map(place, all_states)
-    keys = place(seed_keys(tuple(range(seeds)), CHUNK))
+    states = layout.place(jax.tree.map(lambda x: x[:seeds], all_states))  # own buffers (donated)
+    keys = layout.place(seed_keys(tuple(range(seeds)), CHUNK))
     data = jax.device_put(data, layout.replicated)
     tic = time.perf_counter()
     compiled = make_chunk_fn(phase, BATCH, calls, layout=layout).lower(states, data, keys, jnp.int32(0)).compile()

@@ -116,8 +116,8 @@ def ours(data, updates: int, layer_norm: bool):
     (phase,) = algo.phases(updates)
     calls = updates // phase.updates_per_call
     layout = member_layout(1)
-    state = {"s": jax.device_put(jax.jit(jax.vmap(algo.init))(seed_keys((0,), INIT)), layout.split), "i": 0}
-    keys = jax.device_put(seed_keys((0,), CHUNK), layout.split)
+    state = {"s": layout.place(jax.jit(jax.vmap(algo.init))(seed_keys((0,), INIT))), "i": 0}
+    keys = layout.place(seed_keys((0,), CHUNK))
     data = jax.device_put(data, layout.replicated)
     compiled = make_chunk_fn(phase, BATCH, calls, layout=layout).lower(state["s"], data, keys, jnp.int32(0)).compile()
 

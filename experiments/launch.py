@@ -88,8 +88,6 @@ def _child_argv(argv, args, out: Path) -> list[str]:
     return kept + (["--out", str(out)] if args.out is None and args.resume is None else [])
 
 
-
-
 def start_local_processes(args, argv, prog: str, out: Path):
     """With --processes N > 1: this process becomes process 0 of a run over N processes of this machine and starts
     the others (`offrl_jax.distributed.LocalProcesses`, to be closed at the end); otherwise None."""

@@ -144,10 +144,14 @@ def to_host(tree: Any) -> Any:
     return jax.tree.map(one, tree)
 
 
+def _block_size(members: int) -> int:
+    return -(-members // jax.process_count())  # ceil(members / processes)
+
+
 def my_block(members: int) -> slice:
     """The contiguous block of members this process evaluates: blocks of ceil(members / processes), the last ones
     shorter (or empty)."""
-    size = -(-members // jax.process_count())
+    size = _block_size(members)
     start = min(members, jax.process_index() * size)
     return slice(start, min(members, start + size))
 
@@ -159,8 +163,7 @@ def gather(local: np.ndarray, members: int) -> np.ndarray:
     from jax.experimental import multihost_utils
 
     local = np.asarray(local, np.float64)
-    size = -(-members // jax.process_count())  # every process sends a whole block, NaN-padded
-    block = np.full((size, *local.shape[1:]), np.nan)
+    block = np.full((_block_size(members), *local.shape[1:]), np.nan)  # every process sends a whole block, NaN-padded
     block[:len(local)] = local
     return np.array(multihost_utils.process_allgather(block, tiled=True))[:members]  # a writable copy
 

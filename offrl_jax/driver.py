@@ -3,9 +3,10 @@ sampling minibatches on the device inside the scan, for S seeds (members) at onc
 
 Where the members go (`member_layout`): split over the devices (`jax.shard_map` over a 1-D mesh), and on each device
 batched with `jax.vmap` (GPU, TPU) or run one after another with `lax.map` (CPU, where batched matmuls are slower
-than plain ones: +34 % updates/s at S = 4 on one core, benchmarks/README.md).  On the CPU the command line gives a
-process one single-threaded XLA device per core (`offrl_jax.workers.cpu_flags`), so one run of S seeds fills every
-core.  Members that do not divide over the devices are padded with copies of the last one, whose results are dropped.
+than plain ones: +24 % TD3+BC updates/s at S = 4 on one core, benchmarks/README.md).  On the CPU the command line
+gives a process one single-threaded XLA device per core (`offrl_jax.workers.cpu_flags`), so one run of S seeds fills
+every core.  Members that do not divide over the devices are padded with copies of the last one, whose results are
+dropped.
 
 Randomness is a pure function of (seed, global update index): the key of the update call at update u is
 fold_in(fold_in(PRNGKey(seed), CHUNK), u), drawn inside the scan.  So how the updates are cut into chunks (the
@@ -96,6 +97,18 @@ class Layout:
     def replicated(self) -> NamedSharding:
         return NamedSharding(self.mesh, P())
 
+    def place(self, tree: Any) -> Any:
+        """A pytree of the run's members (leading axis) padded with copies of the last one and split over the mesh;
+        every leaf gets its own buffer (targets start equal to params), so a chunk function can donate them."""
+        pad = self.padded - self.members
+        grow = (lambda x: x) if not pad else (lambda x: np.concatenate([x, np.repeat(x[-1:], pad, axis=0)]))
+        return jax.device_put(jax.tree.map(lambda x: grow(np.array(x)), tree), self.split)
+
+
+def default_mode(device=None) -> str:
+    """How a device runs its members by default: one after another on the CPU ("map"), batched elsewhere."""
+    return "map" if (device or jax.devices()[0]).platform == "cpu" else "vmap"
+
 
 def member_layout(members: int, devices=None, mode: str | None = None) -> Layout:
     """The layout of `members` members over `devices` (default: every device; with one process, the fewest devices
@@ -105,7 +118,7 @@ def member_layout(members: int, devices=None, mode: str | None = None) -> Layout
     if jax.process_count() == 1:
         per_device = -(-members // len(devices))
         devices = devices[:-(-members // per_device)]
-    mode = mode or ("map" if devices[0].platform == "cpu" else "vmap")
+    mode = mode or default_mode(devices[0])
     if mode not in ("map", "vmap"):
         raise ValueError(f"member mode must be 'map' or 'vmap', not {mode!r}")
     padded = -(-members // len(devices)) * len(devices)
@@ -147,7 +160,7 @@ def make_chunk_fn(phase: Phase, batch_size: int, num_calls: int,
     fn, in_axes = one_seed, (0, None, 0, None, 0)
     if phase_for is None:
         fn, in_axes = (lambda s, d, k, u: one_seed(s, d, k, u, None)), in_axes[:4]
-    mode = layout.mode if layout is not None else member_layout(1).mode
+    mode = layout.mode if layout is not None else default_mode()
     fn = over_members(fn, in_axes, mode)
     if layout is not None and layout.mesh.size > 1:  # each device runs `fn` on its own block of members
         fn = jax.shard_map(fn, mesh=layout.mesh, in_specs=tuple(P() if ax is None else P("members") for ax in in_axes),
@@ -202,27 +215,19 @@ class Driver:
         values = tuple(sweep[1]) if sweep else (None,)
         self.members = tuple(s for _ in values for s in self.seeds)  # value-major: member j * S + i
         self.layout = member_layout(len(self.members), devices, members)  # members: "map"/"vmap" (default: platform)
-        pad = self.layout.padded - len(self.members)  # copies of the last member fill the last device
         if getattr(algo.cfg, "timeouts", "bootstrap") == "drop":  # CORL's loader: time-out rows are never sampled
             data = data | {"rows": jnp.asarray(np.flatnonzero(np.asarray(data["timeouts"]) == 0), jnp.int32)}
         self.data = jax.device_put(data, self.layout.replicated)  # one copy per device, shared by its members
         self.hparams = None
         if sweep:
             per_member = np.repeat(np.asarray(values, np.float32), len(self.seeds))
-            self.hparams = self.place({sweep[0]: per_member})
-        self.run_keys = jax.device_put(seed_keys(self.members + self.members[-1:] * pad, CHUNK), self.layout.split)
+            self.hparams = self.layout.place({sweep[0]: per_member})
+        self.run_keys = self.layout.place(seed_keys(self.members, CHUNK))
         self._chunk_fns: dict[tuple[str, int], Callable] = {}
 
     def init(self) -> Any:
         """The members' initial agent states (leading axis: the run's members, not padded)."""
         return jax.jit(jax.vmap(self.algo.init))(seed_keys(self.members, INIT, 0))
-
-    def place(self, tree: Any) -> Any:
-        """A member-batched pytree padded to the layout's members (copies of the last) and split over the mesh; every
-        leaf gets its own buffer (targets start equal to params), so the chunk function can donate them."""
-        pad = self.layout.padded - len(self.members)
-        grow = (lambda x: x) if not pad else (lambda x: np.concatenate([x, np.repeat(x[-1:], pad, axis=0)]))
-        return jax.device_put(jax.tree.map(lambda x: grow(np.array(x)), tree), self.layout.split)
 
     def real(self, tree: Any) -> Any:
         """The run's own members of a padded member-batched pytree (on the host if it spans processes)."""
@@ -257,7 +262,7 @@ class Driver:
         for name, end in (ended or {}).items():
             _end_phase(phases, [p.name for p in phases].index(name), end)
         check_call_grid(phases, chunk_updates)
-        states = self.place(self.init() if states is None else states)
+        states = self.layout.place(self.init() if states is None else states)
         total = sum(p.steps for p in phases)
         extra = () if self.hparams is None else (self.hparams,)
         phase_start = 0
@@ -272,7 +277,7 @@ class Driver:
                 hook = jax.jit(jax.vmap(phase.on_start, in_axes=(0, None, 0)) if phase_for is None else
                                jax.vmap(_swept_on_start(phase_for), in_axes=(0, None, 0, 0)))
                 keys = seed_keys(self.members, PHASE_START, index)
-                states = hook(states, self.data, self.place(keys), *extra)
+                states = hook(states, self.data, self.layout.place(keys), *extra)
             update = max(start_update, phase_start)
             auto = phase.auto_stop  # the metrics of the last whole window of this phase, if any
             previous = last_metrics if auto is not None and update - phase_start >= auto.window else None

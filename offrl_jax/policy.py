@@ -148,10 +148,7 @@ def load_policy(run_dir: str | Path, variant: str | None = None, seed: int | Non
     member = members.index([variant, seed])
     spec = get_env_spec(payload.get("env", study.env))
     v = next(v for v in group if v.label == variant)
-    resolved = raw.get("resolved", {})  # the run's own values, whatever the current defaults are
-    if not isinstance(resolved, dict) or not isinstance(resolved.get(variant, {}), dict):
-        raise ValueError(f"{run_dir / 'config.json'}: 'resolved' must map each variant to its config (an object)")
-    resolved = resolved.get(variant)
+    resolved = raw.get("resolved", {}).get(variant)  # the run's own values (checked by Study.from_json above)
     config = make_config(v.algo, study.env, study.dataset, **(
         {k: tuple(x) if isinstance(x, list) else x for k, x in resolved.items()} if resolved else dict(v.overrides)))
     states = jax.tree.map(lambda x: np.asarray(x)[member], payload["states"])

@@ -124,9 +124,7 @@ class Study:
     def record_json(self, ds: Dataset | None = None, previous: str | None = None,
                     data_sha256: str | None = None) -> str:
         """config.json: the study, its resolved configs, and the run records so far plus this one."""
-        runs = json.loads(previous).get("runs", []) if previous else []
-        if not isinstance(runs, list) or not all(isinstance(r, dict) for r in runs):
-            raise ValueError("'runs' must be a list of run records (objects)")
+        runs = run_records(json.loads(previous)) if previous else []
         raw = dataclasses.asdict(self) | {"resolved": self.resolved(),
                                           "runs": runs + [run_record(ds, self.dataset, data_sha256)]}
         return json.dumps(raw, indent=2, default=list) + "\n"
@@ -142,11 +140,11 @@ class Study:
     @staticmethod
     def _from_json(text: str) -> Study:
         raw = json.loads(text)
-        resolved, runs = raw.pop("resolved", {}), raw.pop("runs", [])  # what the run wrote about itself
+        run_records(raw)  # what the run wrote about itself (checked here); the study is the rest
+        resolved = raw.pop("resolved", {})
+        raw.pop("runs", None)
         if not isinstance(resolved, dict) or not all(isinstance(c, dict) for c in resolved.values()):
             raise ValueError("'resolved' must map each variant to its config (an object)")
-        if not isinstance(runs, list) or not all(isinstance(r, dict) for r in runs):
-            raise ValueError("'runs' must be a list of run records (objects)")
         if "transitions" in raw:  # runs saved before the cap was renamed
             raw["max_transitions"] = raw.pop("transitions")
         value = lambda x: tuple(x) if isinstance(x, list) else x  # noqa: E731  JSON has lists; configs use tuples
@@ -155,6 +153,14 @@ class Study:
         raw["seeds"] = tuple(raw["seeds"])
         raw["final_window"] = tuple(raw["final_window"]) if raw.get("final_window") else None
         return Study(**raw)
+
+
+def run_records(raw: dict) -> list[dict]:
+    """The run records of a config.json's contents (each start or resume of the run), checked: a list of objects."""
+    runs = raw.get("runs", []) if isinstance(raw, dict) else None
+    if not isinstance(runs, list) or not all(isinstance(r, dict) for r in runs):
+        raise ValueError("'runs' must be a list of run records (objects)")
+    return runs
 
 
 def reference_label(study: Study, label: str) -> str | None:
