@@ -177,6 +177,6 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    import sys
+    from offrl_jax.cli import run_main
 
-    sys.exit(main())
+    run_main(main)

@@ -168,4 +168,6 @@ def main(argv=None) -> float:
 
 
 if __name__ == "__main__":
-    main()
+    from offrl_jax.cli import run_main
+
+    run_main(main)

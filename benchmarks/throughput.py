@@ -412,4 +412,6 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
 
 
 if __name__ == "__main__":
-    main()
+    from offrl_jax.cli import run_main
+
+    run_main(main)

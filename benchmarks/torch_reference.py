@@ -24,11 +24,18 @@ import sys
 import time
 
 import numpy as np
-import torch
-import torch.nn.functional as F
-from torch import nn
 
-from offrl_jax.cli import OneLineParser
+from offrl_jax.cli import OneLineParser, print_error
+
+try:
+    import torch
+    import torch.nn.functional as F
+    from torch import nn
+except ModuleNotFoundError:
+    if __name__ != "__main__":  # an import (the parity tests skip on it)
+        raise
+    print_error("benchmarks.torch_reference needs PyTorch: pip install torch")
+    sys.exit(2)
 
 OBS_DIM, ACT_DIM, BATCH, ROWS = 11, 3, 256, 100_000
 
@@ -414,4 +421,6 @@ def main(argv: list[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from offrl_jax.cli import run_main
+
+    run_main(main)

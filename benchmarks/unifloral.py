@@ -250,4 +250,6 @@ def main(argv: list[str] | None = None) -> dict:
 
 
 if __name__ == "__main__":
-    main()
+    from offrl_jax.cli import run_main
+
+    run_main(main)

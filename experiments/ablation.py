@@ -5,7 +5,6 @@ variant, evaluation every 2.5k (4 variants: ~40 min on 2 cores).  The paper: 1M 
 
     python -m experiments.ablation [--env walker2d] [--algo edac] [--updates N]
 """
-import sys
 
 from experiments.common import UsageError, main_guard
 from experiments.mujoco_medium import PRETRAIN, make_study, parser, pretrain_variants
@@ -30,4 +29,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from offrl_jax.cli import run_main
+
+    run_main(main)

@@ -13,7 +13,6 @@ paper's 0.1 (Table 3) under any preset; the authors' door config has 1.0 (`--alp
         [--seeds 4]
 """
 import argparse
-import sys
 
 from experiments.common import OneLineParser, main_guard, positive_int, run_args, study_fields
 from offrl_jax.algos import PRESETS, preset_values
@@ -75,4 +74,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from offrl_jax.cli import run_main
+
+    run_main(main)

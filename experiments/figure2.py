@@ -9,7 +9,6 @@ takes ~10 s per 1k updates, critic pre-training ~190-290 s and EDAC ~480 s, so t
 
     python -m experiments.figure2 [--envs hopper] [--algos td3bc] [--edac-updates 50000] [--seeds 2]
 """
-import sys
 
 from experiments.common import main_guard, positive_int
 from experiments.mujoco_medium import ENVS, LABELS, make_study, parser, pretrain_variants
@@ -60,4 +59,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from offrl_jax.cli import run_main
+
+    run_main(main)

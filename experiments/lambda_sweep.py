@@ -7,7 +7,6 @@ mixing.
 
     python -m experiments.lambda_sweep [--env hopper] [--lambdas 0 0.1 0.5 1] [--lambda-mode target]
 """
-import sys
 
 from experiments.common import main_guard
 from experiments.mujoco_medium import given, make_study, parser, sweep_variants
@@ -35,4 +34,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from offrl_jax.cli import run_main
+
+    run_main(main)

@@ -5,7 +5,6 @@ variant, evaluation every 2k (8 runs in all: ~1 hour on 2 cores; pass --env to r
 
     python -m experiments.layernorm [--env hopper] [--updates N]
 """
-import sys
 
 from experiments.common import main_guard
 from experiments.mujoco_medium import given, make_study, parser, sweep_variants
@@ -37,4 +36,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from offrl_jax.cli import run_main
+
+    run_main(main)

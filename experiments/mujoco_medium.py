@@ -17,7 +17,6 @@ See RESULTS.md for the measured wall-clock time and for what happens with longer
 from __future__ import annotations
 
 import argparse
-import sys
 
 from experiments.common import OneLineParser, UsageError, main_guard, positive_int, run_args, study_fields
 from experiments.flags import FLAG_FIELDS, add_config_flags, config_values, sweepable_fields
@@ -168,4 +167,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from offrl_jax.cli import run_main
+
+    run_main(main)

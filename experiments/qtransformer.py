@@ -6,7 +6,6 @@ evaluation every 2k (~30 min on one core).  The paper: 1M updates.
 
     python -m experiments.qtransformer [--env walker2d] [--updates N]
 """
-import sys
 
 from experiments.common import main_guard
 from experiments.mujoco_medium import given, make_study, parser, sweep_variants
@@ -30,4 +29,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from offrl_jax.cli import run_main
+
+    run_main(main)

@@ -8,7 +8,6 @@ from the cache (or trains it first: hours on a CPU).
 
     python -m experiments.replay [--env walker2d] [--levels medium-replay full-replay]
 """
-import sys
 
 from experiments.common import main_guard
 from experiments.mujoco_medium import make_study, parser
@@ -32,4 +31,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from offrl_jax.cli import run_main
+
+    run_main(main)

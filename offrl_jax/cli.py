@@ -1,14 +1,19 @@
 """What every command of the project shares: one-line errors (`error: ...`, exit 2), typed numbers that refuse NaN,
-infinities and out-of-range values while the flags are parsed, and a check that an output place is writable before
-any work is spent."""
+infinities and out-of-range values while the flags are parsed, a check that an output place is writable before
+any work is spent, and the start and end of a command (`quiet_start`, `run_main`): Ctrl-C and an XLA_FLAGS that
+JAX cannot start with are one line however early they come."""
 from __future__ import annotations
 
 import argparse
 import math
+import os
+import signal
+import subprocess
 import sys
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
+from typing import NoReturn
 
 
 class UsageError(ValueError):
@@ -166,3 +171,71 @@ def one_line_warnings() -> None:
         print(f"warning: {' '.join(str(message).split())}", file=sys.stderr if file is None else file)
 
     warnings.showwarning = show
+
+
+def _interrupted_while_starting(signum, frame) -> None:
+    os.write(2, b"interrupted while starting; nothing was written\n")
+    os._exit(130)
+
+
+def quiet_start() -> None:
+    """Called by the `__init__` of each package that holds commands.  When Python runs one of its modules as a command
+    (`python -m ...`), a Ctrl-C while the modules import ends the process at once, with one line and exit 130,
+    until `run_main` hands Ctrl-C back to the command.  Python's own handling there prints a KeyboardInterrupt
+    traceback, or loses the Ctrl-C when it lands in one of JAX's garbage-collection callbacks, and the command then
+    runs to its end.  An import for any other purpose, or a process that ignores Ctrl-C, is left as it is."""
+    if sys.argv[:1] == ["-m"] and signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        signal.signal(signal.SIGINT, _interrupted_while_starting)
+
+
+XLA_FLAGS_CHECKED = "OFFRL_JAX_XLA_FLAGS_CHECKED"  # the user's XLA_FLAGS that a process of this command tree checked
+
+
+def check_xla_flags() -> None:
+    """Raise UsageError (one line) if JAX cannot start with the user's XLA_FLAGS.  XLA ends the process itself
+    (a fatal log, its whole flag list) on an unknown flag or a value it cannot read, so the flags are tried in a
+    child process first: about a second, and only when XLA_FLAGS is set (once per command, not again in the
+    processes it starts)."""
+    from offrl_jax.workers import USER_XLA_FLAGS
+
+    flags = os.environ.get(USER_XLA_FLAGS, os.environ.get("XLA_FLAGS", "")).strip()
+    if not flags or os.environ.get(XLA_FLAGS_CHECKED) == flags:
+        return
+    env = {k: v for k, v in os.environ.items() if k != USER_XLA_FLAGS} | {"XLA_FLAGS": flags}
+    try:
+        tried = subprocess.run([sys.executable, "-c", "import jax; jax.devices()"], env=env, capture_output=True,
+                               text=True, timeout=300, stdin=subprocess.DEVNULL)
+    except (OSError, subprocess.TimeoutExpired):
+        return  # no verdict: the command itself will tell
+    if tried.returncode != 0:
+        lines = [line.strip() for line in tried.stderr.splitlines() if line.strip()]
+        said = next((line for line in lines if any(k in line for k in ("Unknown flag", "Couldn't interpret",
+                                                                         "Unable to initialize"))),
+                    lines[-1] if lines else f"exit status {tried.returncode}")
+        said = said.split("] ", 1)[-1] if said[:1] in "EFW" and "] " in said else said  # drop XLA's log prefix
+        raise UsageError(f"JAX cannot start with XLA_FLAGS={flags!r}: {said[:300]}")
+    os.environ[XLA_FLAGS_CHECKED] = flags
+
+
+def run_main(main: Callable[[], object]) -> NoReturn:
+    """The `if __name__ == "__main__"` of every command.  Ctrl-C is a KeyboardInterrupt again (see `quiet_start`);
+    one the command does not handle itself is one line, exit 130, and the process ends at once (an interpreter
+    shutting down while XLA was compiling could crash).  An XLA_FLAGS that JAX cannot start with is one line, exit
+    2, before the command's work."""
+    try:
+        if signal.getsignal(signal.SIGINT) is _interrupted_while_starting:
+            signal.signal(signal.SIGINT, signal.default_int_handler)
+        check_xla_flags()
+        code = main()
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(130)
+    except (UsageError, RuntimeError) as e:
+        if os.environ.get("OFFRL_JAX_DEBUG") == "1" or not (
+                isinstance(e, UsageError) or "Unable to initialize backend" in str(e)):
+            raise
+        print_error(e)
+        code = 2
+    sys.exit(code if isinstance(code, int) else 0)

@@ -1,0 +1,81 @@
+"""The start and end of every command (offrl_jax.cli.quiet_start, run_main): a Ctrl-C at any moment, and an XLA_FLAGS
+that JAX cannot start with, are one line and a non-zero exit, never a traceback, and never lost."""
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+ENV = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "OFFRL_JAX_USER_XLA_FLAGS")}
+
+
+def python(code: str, **env) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120,
+                          env=ENV | env, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+
+
+def one_line(stderr: str) -> str:
+    lines = stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in stderr, stderr
+    return lines[0]
+
+
+@pytest.mark.parametrize("package", ["experiments", "benchmarks", "offrl_jax"])
+def test_ctrl_c_while_a_command_imports_ends_it_in_one_line(package):
+    """`python -m package.module` sets sys.argv[0] to "-m" while it imports the package: a Ctrl-C then (here sent
+    by the process to itself) ends the process at once, before any of the command's work."""
+    result = python(f"import sys; sys.argv[0] = '-m'; import {package}, os, signal, time\n"
+                    "os.kill(os.getpid(), signal.SIGINT); time.sleep(30); print('went on')")
+    assert result.returncode == 130 and "went on" not in result.stdout
+    assert one_line(result.stderr) == "interrupted while starting; nothing was written"
+
+
+def test_an_import_for_other_purposes_keeps_python_s_ctrl_c():
+    result = python("import experiments, benchmarks, offrl_jax, signal\n"
+                    "assert signal.getsignal(signal.SIGINT) is signal.default_int_handler; print('kept')")
+    assert result.returncode == 0 and "kept" in result.stdout, result.stderr
+
+
+def test_run_main_gives_ctrl_c_back_to_the_command_and_reports_one_it_leaves():
+    result = python("import sys; sys.argv[0] = '-m'; import experiments, os, signal, time\n"
+                    "from offrl_jax.cli import run_main\n"
+                    "def main():\n"
+                    "    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler\n"
+                    "    os.kill(os.getpid(), signal.SIGINT); time.sleep(30)\n"
+                    "run_main(main)")
+    assert result.returncode == 130
+    assert one_line(result.stderr) == "interrupted"
+
+
+def test_a_real_command_interrupted_early_is_one_line():
+    proc = subprocess.Popen([sys.executable, "-m", "experiments.theory"], cwd=ROOT, env=ENV, text=True,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    time.sleep(0.4)  # importing, or already working: either way one line
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130
+    assert one_line(err).startswith("interrupted")
+
+
+UNKNOWN = ("--xla_no_such_flag=1", "Unknown flag")  # XLA itself would end the process with its flag list
+
+
+@pytest.mark.parametrize("module, flags, said", [
+    ("offrl_jax.rollout", *UNKNOWN),
+    ("offrl_jax.rollout", "--xla_force_host_platform_device_count=abc", "Couldn't interpret"),
+    ("offrl_jax.rollout", "--xla_force_host_platform_device_count=0", "Unable to initialize"),
+    ("benchmarks.throughput", *UNKNOWN),
+    ("experiments.mujoco_medium", *UNKNOWN),
+])
+def test_xla_flags_jax_cannot_start_with_are_one_line(tmp_path, module, flags, said):
+    result = subprocess.run([sys.executable, "-m", module, "--help"], cwd=tmp_path, capture_output=True, text=True,
+                            timeout=120, env=ENV | {"XLA_FLAGS": flags, "PYTHONPATH": str(ROOT)})
+    assert result.returncode == 2
+    line = one_line(result.stderr)
+    assert line.startswith(f"error: JAX cannot start with XLA_FLAGS={flags!r}") and said in line
+    assert not list(tmp_path.iterdir())
