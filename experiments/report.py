@@ -30,6 +30,7 @@ from experiments.common import OneLineParser
 from offrl_jax.cli import check_writable_dir, check_writable_file, print_error
 from offrl_jax.figures import plot_studies
 from offrl_jax.results import merge_runs, read_curves, summary_table as table
+from offrl_jax.study import Study
 
 
 def summaries(path: Path) -> list[Path]:
@@ -51,6 +52,38 @@ def read_summary(path: Path) -> list[dict]:
                                                                for s in summary):
         raise ValueError(f"{path}: not a run's summary (a list of one object per variant expected)")
     return summary
+
+
+def check_run(path: Path, summary: list[dict]) -> None:
+    """Refuse (ValueError, one line) a summary.json that its run's other files contradict: a config.json that is not
+    a saved study or lacks the summary's variants or seeds, a curves.csv that is cut or edited (`read_curves`),
+    holds variants of another run, or ends before the summary's budget.  A summary may cover some of the study's
+    variants (a run stopped and summarised early); a summary.json alone (copied out of its run) is reported as it
+    is."""
+    run = path.parent
+    variants = {s["variant"] for s in summary}
+    known = variants
+    if (run / "config.json").is_file():
+        try:
+            study = Study.from_json((run / "config.json").read_text())
+        except (ValueError, KeyError, TypeError, AttributeError) as e:
+            raise ValueError(f"{run / 'config.json'}: not a saved study ({e})") from None
+        known = {v.label for v in study.variants}
+        if variants - known:
+            raise ValueError(f"{path} does not belong with {run / 'config.json'}: its variant(s) "
+                             f"{', '.join(sorted(variants - known))} are not the study's")
+        if any(list(s.get("seeds", study.seeds)) != list(study.seeds) for s in summary):
+            raise ValueError(f"{path} does not belong with {run / 'config.json'}: other seeds")
+    if (run / "curves.csv").is_file():
+        rows = read_curves(run / "curves.csv")
+        extra = {r["variant"] for r in rows if "variant" in r} - known
+        if extra:
+            raise ValueError(f"{run / 'curves.csv'} holds variant(s) of another run: {', '.join(sorted(extra))}")
+        for s in summary:
+            last = max((r["update"] for r in rows if r.get("variant") == s["variant"] and "update" in r), default=None)
+            if last is None or (isinstance(s.get("updates"), int) and last < s["updates"]):
+                raise ValueError(f"{run / 'curves.csv'}: {s['variant']}'s evaluations end at update {last}, before "
+                                 f"the {s.get('updates')} updates of {path} (a truncated file?)")
 
 
 def curve_table(curves: Path) -> str:
@@ -99,7 +132,9 @@ def main(argv=None) -> int:
         for d in args.dirs:
             for path in summaries(d):
                 try:
-                    text = table(read_summary(path))
+                    summary = read_summary(path)
+                    check_run(path, summary)
+                    text = table(summary)
                 except (KeyError, TypeError, IndexError) as e:
                     raise ValueError(f"{path}: not a run's summary (missing or empty {e})") from None
                 print(f"### {path.parent}\n\n{text}\n")

@@ -3,6 +3,9 @@
 (missing file, NaN, out-of-bounds actions and unknown names are in test_datasets_cli.py; invalid hyper-parameters
 and unknown env/algorithm names through the experiment CLI in test_experiments.py.)
 """
+import shutil
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -192,6 +195,39 @@ def test_report_refuses_a_summary_that_is_not_one(tmp_path):
     for text in ('{"a": 1}', "[1, 2]", "null", "not json", "[]"):
         (tmp_path / "summary.json").write_text(text)
         assert str(tmp_path / "summary.json") in _one_line_error("experiments.report", str(tmp_path))
+
+
+RUN = Path(__file__).resolve().parents[1] / "results" / "mujoco_medium" / "default-20261202"
+
+
+@pytest.mark.parametrize("damage, message", [
+    (None, None),
+    (lambda run: (run / "config.json").unlink(), None),  # a summary without its config is reported as it is
+    (lambda run: (run / "curves.csv").write_text("".join((run / "curves.csv").read_text().splitlines(True)[:-1])),
+     "has no row for seed"),  # the last line cut
+    (lambda run: (run / "curves.csv").write_text("".join((run / "curves.csv").read_text().splitlines(True)[:-6])),
+     "end at update"),  # cut at an evaluation boundary: before the budget
+    (lambda run: (run / "config.json").write_text((run / "config.json").read_text().replace('"scratch"', '"other"')),
+     "are not the study's"),  # a config of another study
+    (lambda run: (run / "config.json").write_text('{"name": 1}'), "not a saved study"),
+    (lambda run: (run / "curves.csv").write_text((run / "curves.csv").read_text().replace("\nscratch,", "\nx,")),
+     "another run"),
+])
+def test_report_reads_a_run_as_a_whole(tmp_path, capsys, damage, message):
+    """report RUN checks the summary against the run's config.json and curves.csv: a damaged or mixed run is one
+    line, not a table."""
+    from experiments.report import main
+
+    run = tmp_path / "run"
+    shutil.copytree(RUN, run)
+    if damage is not None:
+        damage(run)
+    code = main([str(run)])
+    out, err = capsys.readouterr()
+    if message is None:
+        assert code == 0 and "| pretrained" in out, err
+    else:
+        assert code == 2 and message in err and len(err.strip().splitlines()) == 1 and not out, err
 
 
 def test_datasets_generate_refuses_an_existing_dataset_without_overwrite(tmp_path):
