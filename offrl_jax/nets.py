@@ -191,3 +191,11 @@ class CriticEnsemble(nn.Module):
             axis_size=self.num,
         )
         return ensemble(self.hidden, self.layer_norm, self.out_scale, self.arch)(obs, act)
+
+    def member(self, variables: dict, i: int) -> tuple[Critic, dict]:
+        """Member i as a plain `Critic` and its variables: `critic.apply(v, obs, act)` (...,) equals
+        `self.apply(variables, obs, act)[i]`.  Cheaper than a 1-member ensemble on XLA CPU, whose reductions over
+        rows with a leading axis of size 1 ran 7x slower than the same reductions without it (benchmarks/README.md,
+        "Against unifloral")."""
+        critic = Critic(self.hidden, self.layer_norm, self.out_scale, self.arch, parent=None)
+        return critic, {"params": jax.tree.map(lambda x: x[i], variables["params"]["VmapCritic_0"])}

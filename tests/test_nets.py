@@ -66,3 +66,13 @@ def test_layer_norm_without_affine_has_no_scale_or_bias_and_normalises():
     ens = CriticEnsemble(num=2, hidden=(8, 8), arch=Arch(layer_norm_affine=False))
     leaves = jax.tree.leaves(ens.init(jax.random.PRNGKey(2), x, jnp.ones((4, 2))))
     assert len(leaves) == 2 * 3  # kernel + bias of 3 Dense layers, stacked over members; no LayerNorm leaves
+
+
+def test_an_ensemble_member_applied_alone_equals_its_row_of_the_ensemble():
+    """CriticEnsemble.member(i): a plain Critic with member i's parameters (what TD3+BC's actor loss applies)."""
+    ensemble = CriticEnsemble(3, (32, 32))
+    obs, act = jax.random.normal(jax.random.PRNGKey(1), (5, 11)), jax.random.normal(jax.random.PRNGKey(2), (5, 3))
+    variables = ensemble.init(jax.random.PRNGKey(0), obs, act)
+    for i in range(3):
+        critic, member = ensemble.member(variables, i)
+        np.testing.assert_array_equal(critic.apply(member, obs, act), ensemble.apply(variables, obs, act)[i])

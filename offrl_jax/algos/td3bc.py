@@ -118,8 +118,6 @@ class TD3BC:
         arch = arch_of(config)
         self.actor = DeterministicActor(act_dim, config.actor_hidden or config.hidden, config.actor_layer_norm, arch)
         self.critic = CriticEnsemble(config.num_critics, config.hidden, config.critic_layer_norm, arch=arch)
-        self.first_critic = CriticEnsemble(1, config.hidden, config.critic_layer_norm,  # member 0's parameters only
-                                           arch=arch)
         self.actor_tx = optax.adam(config.actor_lr)
         self.critic_tx = optax.adam(config.critic_lr)
 
@@ -187,10 +185,10 @@ class TD3BC:
 
     def actor_loss(self, params, state, batch: Batch):
         pi = self.actor.apply(params, batch["observations"])
-        # TD3 uses Q_1 alone for the actor.  Slice member 0's parameters and apply a 1-member ensemble, rather than
-        # `self.critic.apply(...)[0]`: the actor's gradient then runs through one critic, not all of them.
-        first = jax.tree.map(lambda p: p[:1], state.critic.params)
-        q = self.first_critic.apply(first, batch["observations"], pi)[0]
+        # TD3 uses Q_1 alone for the actor: member 0 applied as a plain critic, rather than `self.critic.apply(...)[0]`,
+        # so the actor's gradient runs through one critic, not all of them
+        critic, first = self.critic.member(state.critic.params, 0)
+        q = critic.apply(first, batch["observations"], pi)
         loss = L.td3bc_actor_loss(q, pi, batch["actions"], self.cfg.alpha, self.cfg.q_scale_eps)
         return loss, {"actor_loss": loss, "bc_mse": L.bc_loss(pi, batch["actions"])}
 
