@@ -14,7 +14,8 @@ paper's 0.1 (Table 3) under any preset; the authors' door config has 1.0 (`--alp
 """
 import argparse
 
-from experiments.common import OneLineParser, main_guard, positive_int, run_args, study_fields
+from experiments.common import OneLineParser, main_guard, positive_int, study_fields
+from experiments.flags import run_args
 from offrl_jax.algos import PRESETS, preset_values
 from offrl_jax.cli import number
 from offrl_jax.study import Study, Variant

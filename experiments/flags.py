@@ -1,4 +1,5 @@
-"""Command-line flags generated from the algorithm config dataclasses: one flag per config field.
+"""Command-line flags: the run flags every experiment shares (`run_args`), and the flags generated from the
+algorithm config dataclasses, one per config field.
 
 A field declared in `TD3BCConfig` or `EDACConfig` (`offrl_jax/algos/`) becomes `--field-name`, typed from its
 annotation, with the comment beside (or above) the field as its help text.  So adding a hyper-parameter is one
@@ -23,11 +24,13 @@ import inspect
 import re
 import types
 import typing
+from pathlib import Path
 from typing import Any
 
 from offrl_jax.algos.edac import EDACConfig
 from offrl_jax.algos.td3bc import TD3BCConfig
-from offrl_jax.cli import number, positive_int
+from offrl_jax.cli import int_at_least, number, positive_int, seed_int
+from offrl_jax.loggers import LOGGERS
 
 CONFIGS = (TD3BCConfig, EDACConfig)
 # fields a study sets through its own flags or its algorithm choice, never one-by-one
@@ -127,3 +130,85 @@ def config_values(args: argparse.Namespace, dests: typing.Iterable[str]) -> dict
             value = (value[0] if len(value) == 1 else value) if name in sweep else tuple(value)
         values[name] = value
     return values
+
+
+def nonempty(text: str) -> str:
+    if not text.strip():
+        raise argparse.ArgumentTypeError("expected a path or name, got an empty string")
+    return text
+
+
+def host_port(text: str) -> str:
+    """HOST:PORT of process 0 of a multi-process run (the port an integer in [1, 65535])."""
+    host, _, port = text.rpartition(":")
+    if not host or not port.isdigit() or not 1 <= int(port) <= 65535 or any(c.isspace() for c in text):
+        raise argparse.ArgumentTypeError(f"expected HOST:PORT with a port in [1, 65535], got {text!r}")
+    return text
+
+
+def plain_path(text: str) -> Path:
+    """An output path without control characters (a newline in a directory name would split every log line)."""
+    if not text or any(ord(c) < 32 or ord(c) == 127 for c in text):
+        raise argparse.ArgumentTypeError(f"expected a path without control characters (newline, tab, ...), got "
+                                         f"{text!r}")
+    return Path(text)
+
+
+def run_args(parser: argparse.ArgumentParser, updates: int | None, eval_every: int | None, seeds: int = 3) -> None:
+    """The run flags; `updates`/`eval_every` None leaves that flag out (a study that sets it itself)."""
+    g = parser.add_argument_group("run")
+    g.add_argument("--seeds", type=positive_int, default=seeds, help="number of seeds, vmapped (default %(default)s)")
+    g.add_argument("--seed-offset", type=seed_int, default=0, help="first seed (seeds are offset..offset+N-1)")
+    if updates is not None:
+        g.add_argument("--updates", type=positive_int, default=updates,
+                       help="total gradient updates per variant, pre-training included (default %(default)s)")
+    if eval_every is not None:
+        g.add_argument("--eval-every", type=positive_int, default=eval_every,
+                       help="updates between evaluations (default %(default)s)")
+    g.add_argument("--eval-episodes", type=positive_int, default=10,
+                   help="episodes per evaluation per seed (default %(default)s)")
+    g.add_argument("--batch-size", type=positive_int, default=256)
+    g.add_argument("--checkpoint-every", type=int_at_least(0), default=0,
+                   help="updates between checkpoints (0: every evaluation)")
+    g.add_argument("--keep-checkpoints", type=int_at_least(0, 2**31 - 1), default=0,
+                   help="besides the last and the best, keep the N newest periodic checkpoints as "
+                        "checkpoints/<variant>.<update>.msgpack (default 0)")
+    g.add_argument("--dataset-path", type=nonempty, default=None,
+                   help="a D4RL .hdf5, Minari directory or id, or .npz to use instead")
+    g.add_argument("--max-transitions", "--transitions", dest="max_transitions", type=positive_int, default=None,
+                   help="train on the first N transitions only (a dataset not cached yet is generated at that size "
+                        "for this run, and not cached)")
+    g.add_argument("--clip-actions", action="store_true", help="clip out-of-bounds dataset actions (with a warning)")
+    g.add_argument("--out", type=plain_path, default=None, help="output directory (default: runs/<study>/<timestamp>)")
+    g.add_argument("--overwrite", action="store_true",
+                   help="replace the earlier run in --out (only a directory whose config.json is a saved study)")
+    g.add_argument("--resume", type=Path, default=None,
+                   help="continue the run saved in this directory with the settings saved there; --updates N "
+                        "larger than the saved budget extends it, --parallel and --no-progress may change; any "
+                        "other flag is refused")
+    g.add_argument("--config", type=Path, default=None,
+                   help="re-run the run saved in this config.json (or run directory) exactly, into a new --out; "
+                        "run flags and single-valued hyper-parameter flags given with it change that one value "
+                        "(for every variant)")
+    g.add_argument("--parallel", type=positive_int, default=2,
+                   help="variants trained at once (default %(default)s); on the CPU each in a process pinned to its "
+                        "own core(s), on a GPU in threads; 1 = one after another, each splitting its seeds over "
+                        "every core")
+    g.add_argument("--no-progress", action="store_true",
+                   help="no progress bar: one plain line per evaluation instead (for batch logs)")
+    m = parser.add_argument_group("many processes or hosts (jax.distributed; offrl_jax/distributed.py)")
+    m.add_argument("--processes", type=positive_int, default=1,
+                   help="split the seeds of every variant over N processes of this machine, each on its share of "
+                        "the cores (one run: process 0 writes it; default 1). One process already splits a "
+                        "variant's seeds over its cores, so this is mostly a test of a multi-host launch")
+    m.add_argument("--distributed", action="store_true",
+                   help="one run over every process JAX finds in the cluster's environment (SLURM, a TPU slice, "
+                        "Open MPI); needs --out or --resume")
+    m.add_argument("--coordinator", type=host_port, default=None, metavar="HOST:PORT",
+                   help="or set the processes by hand: process 0's address, with --num-processes and --process-id")
+    m.add_argument("--num-processes", type=positive_int, default=None)
+    m.add_argument("--process-id", type=int_at_least(0), default=None)
+    g.add_argument("--logger", choices=LOGGERS, default=None,
+                   help="also send every evaluation's scores and metrics to TensorBoard (RUN/tensorboard/) or "
+                        "Weights & Biases; curves.csv stays the record (pip install -e \".[tensorboard]\" or "
+                        "\".[wandb]\")")

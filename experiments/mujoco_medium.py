@@ -18,8 +18,8 @@ from __future__ import annotations
 
 import argparse
 
-from experiments.common import OneLineParser, UsageError, main_guard, positive_int, run_args, study_fields
-from experiments.flags import FLAG_FIELDS, add_config_flags, config_values, sweepable_fields
+from experiments.common import OneLineParser, UsageError, main_guard, positive_int, study_fields
+from experiments.flags import FLAG_FIELDS, add_config_flags, config_values, run_args, sweepable_fields
 from offrl_jax.algos import ALGOS, PRESETS, preset_values
 from offrl_jax.algos.edac import EDACConfig
 from offrl_jax.algos.td3bc import TD3BCConfig
