@@ -1,6 +1,6 @@
 import sys as _sys
 
-if _sys.argv[:1] == ["-m"]:  # one of this package's modules runs as a command: see offrl_jax.cli.quiet_start
-    from offrl_jax.cli import quiet_start as _quiet_start
+if _sys.argv[:1] == ["-m"]:  # one of this package's modules runs as a command: see offrl_jax.interrupts
+    from offrl_jax.interrupts import quiet_start as _quiet_start
 
     _quiet_start()

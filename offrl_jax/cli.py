@@ -1,19 +1,20 @@
 """What every command of the project shares: one-line errors (`error: ...`, exit 2), typed numbers that refuse NaN,
 infinities and out-of-range values while the flags are parsed, a check that an output place is writable before
-any work is spent, and the start and end of a command (`quiet_start`, `run_main`): Ctrl-C and an XLA_FLAGS that
-JAX cannot start with are one line however early they come."""
+any work is spent, and the end of a command (`run_main`): an unhandled Ctrl-C and an XLA_FLAGS that JAX cannot
+start with are one line (`offrl_jax.interrupts` for Ctrl-C while a command starts)."""
 from __future__ import annotations
 
 import argparse
 import math
 import os
-import signal
 import subprocess
 import sys
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import NoReturn
+
+from offrl_jax.interrupts import finish, hand_over
 
 
 class UsageError(ValueError):
@@ -173,21 +174,6 @@ def one_line_warnings() -> None:
     warnings.showwarning = show
 
 
-def _interrupted_while_starting(signum, frame) -> None:
-    os.write(2, b"interrupted while starting; nothing was written\n")
-    os._exit(130)
-
-
-def quiet_start() -> None:
-    """Called by the `__init__` of each package that holds commands.  When Python runs one of its modules as a command
-    (`python -m ...`), a Ctrl-C while the modules import ends the process at once, with one line and exit 130,
-    until `run_main` hands Ctrl-C back to the command.  Python's own handling there prints a KeyboardInterrupt
-    traceback, or loses the Ctrl-C when it lands in one of JAX's garbage-collection callbacks, and the command then
-    runs to its end.  An import for any other purpose, or a process that ignores Ctrl-C, is left as it is."""
-    if sys.argv[:1] == ["-m"] and signal.getsignal(signal.SIGINT) is signal.default_int_handler:
-        signal.signal(signal.SIGINT, _interrupted_while_starting)
-
-
 XLA_FLAGS_CHECKED = "OFFRL_JAX_XLA_FLAGS_CHECKED"  # the user's XLA_FLAGS that a process of this command tree checked
 
 
@@ -218,15 +204,16 @@ def check_xla_flags() -> None:
 
 
 def run_main(main: Callable[[], object]) -> NoReturn:
-    """The `if __name__ == "__main__"` of every command.  Ctrl-C is a KeyboardInterrupt again (see `quiet_start`);
-    one the command does not handle itself is one line, exit 130, and the process ends at once (an interpreter
-    shutting down while XLA was compiling could crash).  An XLA_FLAGS that JAX cannot start with is one line, exit
-    2, before the command's work."""
+    """The `if __name__ == "__main__"` of every command.  Ctrl-C is a KeyboardInterrupt from here on
+    (`offrl_jax.interrupts`); one the command does not handle itself is one line, exit 130, and the process ends at
+    once (an interpreter shutting down while XLA was compiling could crash).  An XLA_FLAGS that JAX cannot start
+    with is one line, exit 2, before the command's work."""
     try:
-        if signal.getsignal(signal.SIGINT) is _interrupted_while_starting:
-            signal.signal(signal.SIGINT, signal.default_int_handler)
+        hand_over()
         check_xla_flags()
         code = main()
+        if finish():  # a Ctrl-C put off until main had returned
+            raise KeyboardInterrupt
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         sys.stdout.flush()

@@ -1,0 +1,80 @@
+"""Ctrl-C in a command, at any moment: one line and exit 130, never a traceback and never lost.
+
+`quiet_start` (called by the `__init__` of each package that holds commands, so this module imports nothing heavy)
+covers the imports before a command's `main`: a Ctrl-C there ends the process at once.  `during_command` is the
+handler from `offrl_jax.cli.run_main` on: Ctrl-C raises KeyboardInterrupt, which the command handles (a training
+run stops at its next chunk boundary), except where Python would lose it or a C extension could crash on it: inside
+an import (JAX imported lazily: a half-initialised extension aborts the process or leaves an ImportError) or inside
+a callback whose exception Python prints and drops (JAX's garbage-collection callback, a weak reference's
+callback, a `__del__`).  There it is put off and tried again every 50 ms; one still put off when the command's
+`main` returns makes the command end as interrupted.
+"""
+from __future__ import annotations
+
+import os
+import signal
+import sys
+
+RETRY_S = 0.05
+
+
+def _interrupted_while_starting(signum, frame) -> None:
+    os.write(2, b"interrupted while starting; nothing was written\n")
+    os._exit(130)
+
+
+def quiet_start() -> None:
+    """When Python runs one of the package's modules as a command (`python -m ...`: sys.argv[0] is "-m" while the
+    package imports), a Ctrl-C until `run_main` ends the process at once, with one line and exit 130.  An import
+    for any other purpose, or a process that ignores Ctrl-C, is left as it is."""
+    if sys.argv[:1] == ["-m"] and signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        signal.signal(signal.SIGINT, _interrupted_while_starting)
+
+
+def _unsafe(frame) -> bool:
+    """Whether an exception raised here could crash the process, turn into another error or be dropped (see the
+    module doc): anywhere inside an import (a C extension being initialised crashes on it, numpy's turns it into an
+    ImportError), or inside a callback whose exception Python prints and drops (JAX's garbage-collection callback,
+    a weak reference's callback, a `__del__`)."""
+    while frame is not None:
+        code = frame.f_code
+        if (code.co_filename.startswith("<frozen importlib") or code.co_name in ("_xla_gc_callback", "__del__")
+                or code.co_filename.endswith(("weakref.py", "_weakrefset.py"))):
+            return True
+        frame = frame.f_back
+    return False
+
+
+_pending = False  # a Ctrl-C put off by `during_command` and not raised yet
+
+
+def during_command(signum, frame) -> None:
+    """SIGINT while a command runs: KeyboardInterrupt, or, where it would be lost, the same again in 50 ms (a
+    timer's SIGALRM comes back here: no thread is started inside a callback)."""
+    global _pending
+    if signum == signal.SIGALRM and not _pending:
+        return  # a timer set before `finish` cancelled it
+    if _unsafe(frame):
+        _pending = True
+        signal.signal(signal.SIGALRM, during_command)
+        signal.setitimer(signal.ITIMER_REAL, RETRY_S)
+        return
+    _pending = False
+    raise KeyboardInterrupt
+
+
+def finish() -> bool:
+    """When the command's `main` has returned: Ctrl-C is ignored from now on (the interpreter is shutting down), any
+    timer is cancelled, and the result says whether a Ctrl-C was still put off (the command then counts as
+    interrupted)."""
+    global _pending
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.setitimer(signal.ITIMER_REAL, 0)
+    pending, _pending = _pending, False
+    return pending
+
+
+def hand_over() -> None:
+    """From `run_main`: the command's own Ctrl-C handling (`during_command`) replaces `quiet_start`'s."""
+    if signal.getsignal(signal.SIGINT) in (_interrupted_while_starting, signal.default_int_handler):
+        signal.signal(signal.SIGINT, during_command)
