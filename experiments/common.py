@@ -65,12 +65,35 @@ def output_dir(args, study_name: str) -> tuple[Path, bool]:
         if not args.overwrite:
             raise UsageError(f"{args.out} exists and is not empty; pass --overwrite or choose another --out")
         try:
-            saved_studies(args.out)
+            saved = saved_studies(args.out)
         except (UsageError, OSError):
             raise UsageError(f"{args.out} holds no earlier run (no saved study in config.json); --overwrite will not "
                              "delete it") from None
+        foreign = not_from_a_run(args.out, saved)
+        if foreign:
+            raise UsageError(f"{args.out} holds {', '.join(foreign[:5])}{', ...' if len(foreign) > 5 else ''}, which "
+                             "a run does not write; --overwrite replaces only a run: move them or choose another --out")
         return args.out, True
     return args.out, False
+
+
+# what a run writes in its directory (offrl_jax/runner.py, offrl_jax/loggers.py)
+RUN_ENTRIES = frozenset({"config.json", "curves.csv", "curves.png", "summary.json", "checkpoints", "tensorboard",
+                         "wandb", "wandb-run-id"})
+
+
+def not_from_a_run(out: Path, saved: Study | list[Study]) -> list[str]:
+    """The entries of run directory `out` that no run writes (a study's sub-directory of a multi-study run holds a
+    run's entries), as paths relative to `out`: what --overwrite must not delete."""
+    studies = {s.name for s in saved} if isinstance(saved, list) else set()
+    ours = lambda entry: entry.name in RUN_ENTRIES or (entry.name.startswith(".") and entry.name.endswith(".tmp"))  # noqa: E731
+    foreign = []
+    for entry in sorted(out.iterdir()):
+        if entry.name in studies and entry.is_dir():
+            foreign += [f"{entry.name}/{e.name}" for e in sorted(entry.iterdir()) if not ours(e)]
+        elif not ours(entry):
+            foreign.append(entry.name)
+    return foreign
 
 
 def refuse_existing(parser: argparse.ArgumentParser, out: Path | None, overwrite: bool, names: tuple[str, ...]) -> None:

@@ -1,5 +1,5 @@
-"""The start and end of every command (offrl_jax.interrupts, offrl_jax.cli.run_main): a Ctrl-C at any moment, and an XLA_FLAGS
-that JAX cannot start with, are one line and a non-zero exit, never a traceback, and never lost."""
+"""The start and end of every command (offrl_jax.interrupts, offrl_jax.cli.run_main): a Ctrl-C at any moment, and an
+XLA_FLAGS that JAX cannot start with, are one line and a non-zero exit, never a traceback, and never lost."""
 import os
 import signal
 import subprocess

@@ -4,6 +4,7 @@ path gets a one-line error that says what is wrong with it.
 """
 import hashlib
 import json
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -176,3 +177,18 @@ def test_a_failed_run_leaves_no_folders_it_made_for_its_out(tmp_path):
                              str(tmp_path / "missing.hdf5")], capture_output=True, text=True, timeout=300,
                             cwd=Path(__file__).resolve().parents[1])
     assert result.returncode == 2 and list(tmp_path.iterdir()) == []
+
+
+# ------------------------------------------------------------------------------------------- training runs
+
+
+@pytest.mark.parametrize("extra", ["README.md", "notes.txt", "mydir/"])
+def test_overwrite_of_a_run_refuses_files_no_run_writes(tmp_path, extra):
+    """A saved run with a file the user put there (a README, notes, a folder) is not a run --overwrite may delete."""
+    out = tmp_path / "run"
+    shutil.copytree(ROOT / "results" / "mujoco_medium" / "default-20261202b", out)
+    if extra != "README.md":
+        (out / "README.md").unlink()
+        (out / extra).mkdir() if extra.endswith("/") else (out / extra).write_text("mine\n")
+    line = refused(tmp_path, "experiments.mujoco_medium", "--out", out, "--overwrite", "--updates", "20000")
+    assert f"holds {extra.rstrip('/')}, which a run does not write" in line, line
