@@ -3,22 +3,22 @@
     python -m benchmarks.device_check                       # on the device machine, about 5-8 minutes
     python -m benchmarks.device_check --quick               # a CPU smoke test of the script itself (~1 minute)
 
-It writes one JSON file (default results/benchmarks/device-<device kind>-<date>.json) with
-- the device, JAX version and backend;
+It appends JSON lines to a results file (default results/benchmarks/device-<device kind>-<date>.jsonl, see
+`benchmarks.throughput.results_path`): a {"meta": ...} line, one line per case, a {"main_job": ...} line, with
+- the device, JAX version and backend (in the meta line);
 - the float32 matmul rate (8192², precision "highest") and the TF32 / default-precision rate, in TFLOP/s;
 - TD3+BC and EDAC (N = 10) offline-RL updates/s, summed over members, for members = 1, 8, 64, 256 (seeds or
   seeds x sweep values: one vmapped program, as the driver runs them), with compile time, achieved TFLOP/s from the
   analytic FLOP count, its fraction of each matmul rate, and the device's peak memory after each case;
 - the main job (`python -m experiments.mujoco_medium`, its default) end to end: wall-clock and its final table,
   in the time left of --budget-s (hopper-medium must be cached; the file says so otherwise).
-The file is written after every case, so a check cut short keeps what it measured.
+A line is appended after every case, so a check cut short keeps what it measured.
 A member axis in the hundreds is what fills such a chip: compare updates/s at 1 and at 256.
 """
 from __future__ import annotations
 
 import argparse
 import datetime
-import json
 import subprocess
 import sys
 import tempfile
@@ -28,8 +28,8 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 
-from benchmarks.throughput import CASES, init_states, synthetic_data, time_case
-from offrl_jax.cli import OneLineParser, check_writable_file, positive_int
+from benchmarks.throughput import CASES, append_results, init_states, results_path, synthetic_data, time_case
+from offrl_jax.cli import OneLineParser, positive_int
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -79,28 +79,22 @@ def main(argv: list[str] | None = None) -> dict:
     p.add_argument("--budget-s", type=positive_int, default=540,
                    help="seconds for the whole check (default %(default)s); the main job gets what is left")
     p.add_argument("--quick", action="store_true", help="tiny budget, for testing the script on a CPU")
-    p.add_argument("--out", type=Path, default=None, help="the results file (JSON)")
+    p.add_argument("--out", default=None, help="append the JSON lines to results/benchmarks/OUT.jsonl (or OUT if a "
+                   "path; default device-<device kind>-<date>)")
     args = p.parse_args(argv)
     if args.quick:
         args.members, args.transitions, args.matmul_n, args.no_main_job = [1, 2], 5_000, 256, True
     device = jax.devices()[0]
     kind = device.device_kind.replace(" ", "-").lower()
-    out = args.out or ROOT / "results" / "benchmarks" / f"device-{kind}-{datetime.date.today():%Y%m%d}.json"
-    try:
-        check_writable_file(out)
-    except OSError as e:
-        p.error(str(e))
+    default = ROOT / "results" / "benchmarks" / f"device-{kind}-{datetime.date.today():%Y%m%d}.jsonl"
+    out = results_path(p, str(default) if args.out is None else args.out)
     report = {"date": datetime.datetime.now().isoformat(timespec="seconds"), "device_kind": device.device_kind,
               "platform": jax.default_backend(), "devices": jax.device_count(), "jax": jax.__version__,
               "command": " ".join(["python", "-m", "benchmarks.device_check", *(argv or sys.argv[1:])])}
     start = time.perf_counter()
-
-    def save() -> None:  # after every section: a check cut short still leaves what it measured
-        out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_text(json.dumps(report, indent=2) + "\n")
-
     report["matmul_tflops"] = {precision: round(matmul_tflops(args.matmul_n, precision), 2)
                                for precision in ("highest", "default")}
+    append_results(out, [{"meta": dict(report)}])
     print(f"matmul {args.matmul_n}²: {report['matmul_tflops']} TFLOP/s", file=sys.stderr, flush=True)
     data = synthetic_data(args.transitions)
     rows = int(data["rewards"].shape[0])
@@ -118,15 +112,15 @@ def main(argv: list[str] | None = None) -> dict:
             for key in ("peak_gflops", "pct_of_peak"):  # the CPU benchmark's 256-wide chain: not measured here
                 r.pop(key, None)
             report["cases"].append(r)
-            save()
+            append_results(out, [r])
             print(f"{case.label} members={members}: {r['updates_per_s']:.0f} updates/s, "
                   f"{r['pct_of_fp32_matmul']:.1f} % of fp32 matmul, compile {r['compile_s']:.1f}s", file=sys.stderr,
                   flush=True)
     if not args.no_main_job:
         report["main_job"] = main_job(max(1.0, args.budget_s - (time.perf_counter() - start)))
         print(f"main job: {report['main_job']}", file=sys.stderr)
-    save()
-    print(f"wrote {out}", file=sys.stderr)
+        append_results(out, [{"main_job": report["main_job"]}])
+    print(f"appended to {out}", file=sys.stderr)
     return report
 
 

@@ -19,7 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from offrl_jax.cli import OneLineParser
+from offrl_jax.cli import OneLineParser, positive_int
 
 OBS, ACT, HIDDEN, BATCH, ROWS = 11, 3, 256, 256, 100_000
 
@@ -154,13 +154,15 @@ def main(argv=None) -> float:
     p = OneLineParser(prog="benchmarks.handwritten", description=__doc__.split("\n\n")[0])
     p.add_argument("--no-layer-norm", action="store_true")
     p.add_argument("--fused-ln", action="store_true", help="LayerNorm+ReLU with a hand-written VJP")
-    p.add_argument("--seeds", type=int, default=1)
+    p.add_argument("--seeds", type=positive_int, default=1)
     p.add_argument("--mode", choices=("single", "vmap", "unrolled"), default=None,
                    help="default: single for 1 seed, vmap otherwise")
-    p.add_argument("--calls", type=int, default=200, help="update calls per timed chunk")
-    p.add_argument("--reps", type=int, default=5)
+    p.add_argument("--calls", type=positive_int, default=200, help="update calls per timed chunk")
+    p.add_argument("--reps", type=positive_int, default=5, help="timed chunks, median reported")
     args = p.parse_args(argv)
     mode = args.mode or ("single" if args.seeds == 1 else "vmap")
+    if mode == "single" and args.seeds != 1:
+        p.error(f"--mode single runs one seed, not {args.seeds}; use vmap or unrolled for more")
     rate = run(not args.no_layer_norm, args.fused_ln, args.seeds, mode, args.calls, args.reps)
     print(f"hand-written TD3+BC, layer_norm={not args.no_layer_norm} fused_ln={args.fused_ln} seeds={args.seeds} "
           f"mode={mode}: {rate:.1f} updates/s")

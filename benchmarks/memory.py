@@ -17,11 +17,8 @@ import json
 import resource
 import subprocess
 import sys
-from pathlib import Path
 
-from offrl_jax.cli import OneLineParser
-
-RESULTS_DIR = Path("results/benchmarks")
+from offrl_jax.cli import OneLineParser, positive_int
 
 
 def child(algo: str, seeds: int, transitions: int) -> dict:
@@ -52,15 +49,21 @@ def main(argv=None) -> int:
     p = OneLineParser(prog="benchmarks.memory", description=__doc__,
                       formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--algos", nargs="+", default=["td3bc", "edac"], choices=["td3bc", "edac", "td3bc_cql", "edac_bc"])
-    p.add_argument("--seeds", nargs="+", type=int, default=[1, 8])
-    p.add_argument("--transitions", type=int, default=1_000_000)
+    p.add_argument("--seeds", nargs="+", type=positive_int, default=[1, 8], help="vmapped seed counts (default 1 8)")
+    p.add_argument("--transitions", type=positive_int, default=1_000_000, help="rows of the synthetic dataset")
     p.add_argument("--json", action="store_true", help="one JSON object per case on stdout")
-    p.add_argument("--out", default=None, help="also write the JSON lines to results/benchmarks/NAME.jsonl")
+    p.add_argument("--out", default=None,
+                   help="also append the JSON lines to results/benchmarks/OUT.jsonl (or OUT if a path)")
     p.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
     args = p.parse_args(argv)
     if args.child:
         print(json.dumps(child(args.child[0], int(args.child[1]), int(args.child[2]))))
         return 0
+    out_path = None
+    if args.out is not None:
+        from benchmarks.throughput import results_path
+
+        out_path = results_path(p, args.out)  # checked before the work
     rows = []
     for algo in args.algos:
         for s in args.seeds:
@@ -79,12 +82,12 @@ def main(argv=None) -> int:
     if args.json:
         for r in rows:
             print(json.dumps(r))
-    if args.out:
-        RESULTS_DIR.mkdir(parents=True, exist_ok=True)
+    if out_path is not None:
+        from benchmarks.throughput import append_results
+
         cmd = "python -m benchmarks.memory " + " ".join(sys.argv[1:] if argv is None else argv)
-        with open(RESULTS_DIR / f"{args.out}.jsonl", "w") as f:
-            f.write(json.dumps({"meta": {"command": cmd}}) + "\n")
-            f.writelines(json.dumps(r) + "\n" for r in rows)
+        append_results(out_path, [{"meta": {"command": cmd}}, *rows])
+        print(f"appended to {out_path}", file=sys.stderr)
     return 0
 
 

@@ -185,7 +185,7 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     if args.num_critics != 10 and args.algo != "edac":
         p.error("--num-critics is EDAC's ensemble size; TD3+BC has two critics")
-    from benchmarks.throughput import results_path
+    from benchmarks.throughput import append_results, results_path
 
     out_path = results_path(p, args.out)  # checked writable before the work
     print(f"compiling and tracing {args.algo} ...", file=sys.stderr, flush=True)
@@ -196,9 +196,8 @@ def main(argv=None) -> int:
                "date": time.strftime("%Y-%m-%dT%H:%M:%S")}
     print(json.dumps(result) if args.json else table(result))
     if out_path is not None:
-        with out_path.open("a") as f:
-            f.write(json.dumps(result) + "\n")
-        print(f"wrote {out_path}", file=sys.stderr)
+        append_results(out_path, [result])
+        print(f"appended to {out_path}", file=sys.stderr)
     return 0
 
 

@@ -27,7 +27,7 @@ import subprocess
 import sys
 import time
 
-from offrl_jax.cli import OneLineParser, positive_int
+from offrl_jax.cli import OneLineParser, int_at_least, positive_int
 from offrl_jax.workers import SINGLE_THREAD_XLA
 
 CASES = ("1core", "default", "2devices", "2processes")
@@ -105,7 +105,7 @@ def main(argv=None) -> int:
     p.add_argument("--json", action="store_true", help="one JSON line per measurement instead of a table")
     p.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     p.add_argument("--port", default=None, help=argparse.SUPPRESS)
-    p.add_argument("--process-id", type=int, default=None, help=argparse.SUPPRESS)
+    p.add_argument("--process-id", type=int_at_least(0), default=None, help=argparse.SUPPRESS)
     args = p.parse_args(argv)
     if args.worker:
         _worker(args)

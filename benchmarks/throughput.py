@@ -20,7 +20,8 @@ XLA_FLAGS="--xla_cpu_multi_thread_eigen=false --xla_force_host_platform_device_c
 devices, as the command line gives a process on 2 cores (`offrl_jax.workers.cpu_flags`).
 
 Progress goes to stderr, results to stdout (a table, or one JSON object per line with --json).  `--out NAME` also
-writes the JSON lines to results/benchmarks/NAME.jsonl (first line: {"meta": {command, date, machine, load}}).
+appends them to results/benchmarks/NAME.jsonl (a run's first line: {"meta": {command, date, machine, load}}); an
+existing file that is not JSON lines is refused, never overwritten (`results_path`).
 """
 from __future__ import annotations
 
@@ -244,8 +245,11 @@ def time_case(case: Case, seeds: int, data: dict[str, jax.Array], all_states, pe
 
 
 def results_path(parser: argparse.ArgumentParser, out: str | None) -> Path | None:
-    """Where `--out NAME` writes: results/benchmarks/NAME.jsonl (NAME itself if it has a folder or a suffix), checked
-    writable before any work (one line and exit 2 otherwise); None without --out."""
+    """Where `--out` writes, checked before any work (one line and exit 2 otherwise); None without --out.
+
+    `--out` appends one JSON object per line to a results file: results/benchmarks/NAME.jsonl for a bare NAME
+    (results/benchmarks/NAME if NAME has a suffix), the path as given if it has a folder.  An existing file is only
+    appended to if every line of it is a JSON object; nothing in it is ever truncated or rewritten."""
     if out is None:
         return None
     if not out.strip():
@@ -257,7 +261,30 @@ def results_path(parser: argparse.ArgumentParser, out: str | None) -> Path | Non
         check_writable_file(path)
     except OSError as e:
         parser.error(str(e))
+    if path.exists():
+        if not path.is_file():
+            parser.error(f"{path} is not a regular file; --out appends JSON lines to a results file")
+        if not os.access(path, os.W_OK):
+            parser.error(f"{path}: not writable")
+        try:
+            text = path.read_bytes().decode()
+            if not all(isinstance(json.loads(line), dict) for line in text.splitlines() if line.strip()):
+                raise ValueError
+        except OSError as e:
+            parser.error(f"{path}: cannot be read ({e.strerror or e})")
+        except ValueError:
+            parser.error(f"{path} is not a results file (one JSON object per line); --out only appends to one: "
+                         "choose another --out")
     return path
+
+
+def append_results(path: Path, records: list[dict[str, Any]]) -> None:
+    """Append `records` to a results file that `results_path` accepted, one JSON object per line."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("a") as f:
+        if f.tell() and not path.read_bytes().endswith(b"\n"):  # a last line without its newline
+            f.write("\n")
+        f.writelines(json.dumps(r) + "\n" for r in records)
 
 
 def machine() -> str:
@@ -318,7 +345,7 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     p.add_argument("--heavy-s", type=number(0, low_open=True), default=1.5,
                    help="chunks longer than this (one call per seed) are timed once without warm-up")
     p.add_argument("--markdown", metavar="FILE", help="print a markdown table of a results .jsonl file and exit")
-    p.add_argument("--out", help="also write JSON lines to results/benchmarks/OUT.jsonl (or OUT if it is a path)")
+    p.add_argument("--out", help="also append the JSON lines to results/benchmarks/OUT.jsonl (or OUT if it is a path)")
     args = p.parse_args(argv)
 
     if args.markdown is not None:  # an input: the results file to render
@@ -337,15 +364,24 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
                 raise ValueError("not one JSON object per line")
         except ValueError as e:
             p.error(f"{source}: not a results file of this benchmark ({e})")
-        if lines and "meta" in lines[0]:
-            m = lines.pop(0)["meta"]
-            print(f"`{m['command']}` — {m['date']}, {m['machine']}, load average at start {m['load_avg']}, "
-                  f"{m.get('seconds', '?')} s, 1024² matmul {m.get('matmul1024_gflops', '?')} GFLOP/s\n")
+        runs = []  # a file that --out appended to several times: a table per run, after its meta line
+        for line in lines:
+            if "meta" in line or not runs:
+                runs.append((line.get("meta"), []))
+            if "meta" not in line:
+                runs[-1][1].append(line)
         try:
-            print(markdown(lines))
+            text = []
+            for m, rows in runs or [(None, [])]:
+                if m is not None:
+                    text.append(f"`{m['command']}` — {m['date']}, {m['machine']}, load average at start "
+                                f"{m['load_avg']}, {m.get('seconds', '?')} s, 1024² matmul "
+                                f"{m.get('matmul1024_gflops', '?')} GFLOP/s")
+                text.append(markdown(rows))
+            print("\n\n".join(text))
         except (KeyError, TypeError) as e:
             p.error(f"{args.markdown}: not a results file of this benchmark (missing {e})")
-        return lines
+        return [r for _, rows in runs for r in rows]
     if args.quick:
         fixed = [flag for flag, value in (("--algo", args.algo), ("--phase", args.phase), ("--seeds", args.seeds),
                                           ("--num-critics", args.num_critics), ("--target-s", args.target_s),
@@ -401,13 +437,8 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     meta["matmul1024_gflops"] = round(matmul, 2)
     log(f"# done in {meta['seconds']}s")
     if out_path is not None:
-        path = out_path
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with path.open("w") as f:
-            f.write(json.dumps({"meta": meta}) + "\n")
-            for r in results:
-                f.write(json.dumps(r) + "\n")
-        log(f"# wrote {path}")
+        append_results(out_path, [{"meta": meta}, *results])
+        log(f"# appended to {out_path}")
     return results
 
 

@@ -25,7 +25,7 @@ import time
 
 import numpy as np
 
-from offrl_jax.cli import OneLineParser, print_error
+from offrl_jax.cli import OneLineParser, positive_int, print_error
 
 try:
     import torch
@@ -403,14 +403,15 @@ def compare(algos: list[str], rounds: int) -> None:
 
 
 def main(argv: list[str] | None = None) -> None:
-    p = OneLineParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--algo", nargs="*", default=["td3bc", "edac"], choices=["td3bc", "edac"])
+    p = OneLineParser(prog="benchmarks.torch_reference", description=__doc__.split("\n\n")[0])
+    p.add_argument("--algo", nargs="+", default=["td3bc", "edac"], choices=["td3bc", "edac"])
     p.add_argument("--json", action="store_true")
-    p.add_argument("--reps", type=int, default=3)
+    p.add_argument("--reps", type=positive_int, default=3,
+                   help="timed rounds, median reported (default %(default)s)")
     p.add_argument("--compare", action="store_true", help="interleave JAX and PyTorch timings; print the ratio")
-    p.add_argument("--threads", type=int, help="torch.set_num_threads (default: PyTorch's choice)")
+    p.add_argument("--threads", type=positive_int, help="torch.set_num_threads (default: PyTorch's choice)")
     args = p.parse_args(argv)
-    if args.threads:
+    if args.threads is not None:
         torch.set_num_threads(args.threads)
     torch.manual_seed(0)
     print(f"# torch {torch.__version__}, {torch.get_num_threads()} threads, load {os.getloadavg()}", file=sys.stderr)

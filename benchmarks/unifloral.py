@@ -48,7 +48,7 @@ import flax.linen
 import jax
 import jax.numpy as jnp
 
-from benchmarks.throughput import ACT_DIM, BATCH, OBS_DIM, results_path, synthetic_data
+from benchmarks.throughput import ACT_DIM, BATCH, OBS_DIM, append_results, results_path, synthetic_data
 from offrl_jax.algos import make_algorithm, make_config
 from offrl_jax.cli import OneLineParser, positive_int
 from offrl_jax.driver import CHUNK, INIT, make_chunk_fn, member_layout, seed_keys
@@ -242,9 +242,7 @@ def main(argv: list[str] | None = None) -> dict:
         print(f"{'unifloral':<10} {result['unifloral_updates_per_s']:>17.1f}")
         print(f"{'ratio':<10} {result['ratio']:>17.2f}   ours / unifloral")
     if out_path is not None:
-        out_path.parent.mkdir(parents=True, exist_ok=True)
-        with out_path.open("a") as f:
-            f.write(json.dumps(result) + "\n")
+        append_results(out_path, [result])
         log(f"# appended to {out_path}")
     return result
 

@@ -43,6 +43,8 @@ def test_quick_json(capsys, tmp_path):
     from benchmarks.throughput import main
 
     out = tmp_path / "quick.jsonl"
+    earlier = b'{"meta": {"command": "an earlier run"}}\n{"algo": "bc"}'  # saved before; no final newline
+    out.write_bytes(earlier)
     results = main(["--json", "--quick", "--out", str(out)])
     lines = [json.loads(line) for line in capsys.readouterr().out.splitlines() if line.strip()]
     assert len(lines) == len(results) == 1
@@ -51,9 +53,11 @@ def test_quick_json(capsys, tmp_path):
     assert record["seeds"] == 1 and record["finite"]
     for key in ("updates_per_s", "gflop_per_update", "achieved_gflops", "peak_gflops", "pct_of_peak"):
         assert record[key] > 0
+    assert out.read_bytes().startswith(earlier + b"\n")  # appended to, nothing lost
     written = [json.loads(line) for line in out.read_text().splitlines()]
-    assert "command" in written[0]["meta"] and "date" in written[0]["meta"]
-    assert written[1] == record
+    assert len(written) == 4
+    assert "command" in written[2]["meta"] and "date" in written[2]["meta"]
+    assert written[3] == record
 
 
 @pytest.mark.slow  # two fresh JAX processes: ~1 min idle, several under load
@@ -95,9 +99,10 @@ def test_device_check_runs_on_a_cpu_with_a_tiny_budget(tmp_path):
     """The GPU check script itself, at a tiny budget: every section of its one results file is there."""
     from benchmarks import device_check
 
-    out = tmp_path / "device.json"
+    out = tmp_path / "device.jsonl"
     report = device_check.main(["--quick", "--out", str(out)])
-    assert json.loads(out.read_text()) == report
+    meta, *cases = [json.loads(line) for line in out.read_text().splitlines()]
+    assert cases == report["cases"] and meta["meta"] == {k: v for k, v in report.items() if k != "cases"}
     assert set(report["matmul_tflops"]) == {"highest", "default"} and report["matmul_tflops"]["highest"] > 0
     cases = {(c["algo"], c["seeds"]) for c in report["cases"]}
     assert cases == {("td3bc", 1), ("td3bc", 2), ("edac", 1), ("edac", 2)}
@@ -183,3 +188,115 @@ def test_profile_attributes_a_td3bc_update(capsys):
     assert {"matmul", "layernorm"} <= set(parts)
     assert abs(sum(r["share"] for r in result["parts"]) - 1) < 1e-6
     assert parts["matmul"]["gflops"] > 0 and result["updates"] == 20
+
+
+def _refused(capsys, main, argv) -> str:
+    """`main(argv)` stops while its flags are checked: exit 2 and one `error:` line, nothing on stdout."""
+    with pytest.raises(SystemExit) as exit_:
+        main(argv)
+    captured = capsys.readouterr()
+    err = captured.err.strip().splitlines()
+    assert exit_.value.code == 2 and len(err) == 1 and err[0].startswith("error: "), captured.err
+    assert not captured.out.strip()
+    return err[0]
+
+
+def _mains():
+    from benchmarks import device_check, memory, profile, throughput
+
+    return {"throughput": (throughput.main, ["--quick"]), "memory": (memory.main, ["--transitions", "1000"]),
+            "profile": (profile.main, ["--updates", "2"]), "device_check": (device_check.main, ["--quick"])}
+
+
+@pytest.mark.parametrize("name", ["throughput", "memory", "profile", "device_check"])
+@pytest.mark.parametrize("saved", [b"a user's notes\n", b'{"a": 1}\n[1, 2]\n', b'{"a": 1}\n{"b"', b"\xff\xfe\x00"])
+def test_out_refuses_a_file_that_is_not_json_lines_and_leaves_it(capsys, tmp_path, name, saved):
+    main, argv = _mains()[name]
+    out = tmp_path / "notes.txt"
+    out.write_bytes(saved)
+    assert "not a results file" in _refused(capsys, main, [*argv, "--out", str(out)])
+    assert out.read_bytes() == saved
+    assert [f.name for f in tmp_path.iterdir()] == ["notes.txt"]
+
+
+@pytest.mark.parametrize("name", ["throughput", "memory", "profile", "device_check"])
+def test_out_refuses_an_unusable_place_before_any_work(capsys, tmp_path, name):
+    main, argv = _mains()[name]
+    (tmp_path / "a-file").write_text("kept")
+    for out, said in (("", "--out needs a name"), (str(tmp_path), "is a directory"),
+                      (str(tmp_path / "a-file" / "x" / "y.jsonl"), "a-file")):
+        assert said in _refused(capsys, main, [*argv, "--out", out])
+    assert (tmp_path / "a-file").read_text() == "kept" and len(list(tmp_path.iterdir())) == 1
+
+
+def test_results_path_names_and_markdown_of_an_appended_file(capsys, tmp_path, monkeypatch):
+    from benchmarks import throughput
+
+    parser = throughput.OneLineParser()
+    monkeypatch.setattr(throughput, "RESULTS_DIR", tmp_path / "results")
+    assert throughput.results_path(parser, None) is None
+    assert throughput.results_path(parser, "mine") == tmp_path / "results" / "mine.jsonl"
+    assert throughput.results_path(parser, "mine.jsonl") == tmp_path / "results" / "mine.jsonl"  # not .jsonl.jsonl
+    assert throughput.results_path(parser, str(tmp_path / "x" / "y")) == tmp_path / "x" / "y"
+    assert not (tmp_path / "results").exists() and not (tmp_path / "x").exists()  # checked, nothing made
+
+    row = {"algo": "bc", "phase": "bc", "num_critics": 2, "seeds": 1, "updates_per_s": 10.0, "compile_s": 1.0,
+           "gflop_per_update": 0.1, "achieved_gflops": 1.0, "peak_gflops": 10.0, "pct_of_peak": 10.0, "load1": 0.5}
+    out = tmp_path / "two-runs.jsonl"
+    for run in ("first", "second"):
+        meta = {"command": f"the {run} run", "date": "today", "machine": "this one", "load_avg": [0.5]}
+        throughput.append_results(throughput.results_path(parser, str(out)), [{"meta": meta}, row])
+    assert throughput.main(["--markdown", str(out)]) == [row, row]
+    text = capsys.readouterr().out
+    assert text.count("| algo |") == 2 and "the first run" in text and "the second run" in text
+
+
+@pytest.mark.parametrize("module, args, flag", [
+    ("memory", ["--seeds", "0"], "--seeds"),
+    ("memory", ["--seeds", "1", "-1"], "--seeds"),
+    ("memory", ["--transitions", "-5"], "--transitions"),
+    ("handwritten", ["--seeds", "0"], "--seeds"),
+    ("handwritten", ["--seeds", "-3", "--calls", "0", "--reps", "0"], "--seeds"),
+    ("handwritten", ["--calls", "0"], "--calls"),
+    ("handwritten", ["--reps", "1.5"], "--reps"),
+    ("handwritten", ["--mode", "single", "--seeds", "2"], "--mode single"),
+    ("torch_reference", ["--threads", "-1"], "--threads"),
+    ("torch_reference", ["--threads", "0"], "--threads"),
+    ("torch_reference", ["--reps", "-1"], "--reps"),
+    ("torch_reference", ["--algo"], "--algo"),
+    ("scaling", ["--process-id", "-1"], "--process-id"),
+])
+def test_benchmark_refuses_a_bad_number_in_one_line(capsys, module, args, flag):
+    import importlib
+
+    if module == "torch_reference":
+        pytest.importorskip("torch")
+    main = importlib.import_module(f"benchmarks.{module}").main
+    assert flag in _refused(capsys, main, args)
+
+
+@pytest.mark.parametrize("module, args", [
+    ("memory", ["--seeds", "0"]),
+    ("handwritten", ["--calls", "0"]),
+    ("torch_reference", ["--threads", "-1"]),
+])
+def test_benchmark_command_bad_number_is_one_line_and_exit_2(tmp_path, module, args):
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    if module == "torch_reference":
+        pytest.importorskip("torch")
+    result = subprocess.run([sys.executable, "-m", f"benchmarks.{module}", *args], capture_output=True, text=True,
+                            timeout=300, cwd=Path(__file__).resolve().parents[1])
+    assert result.returncode == 2 and result.stderr.count("\n") == 1, result.stderr
+    assert result.stderr.startswith("error: ") and not result.stdout
+
+
+def test_torch_reference_usage_names_the_module(capsys):
+    pytest.importorskip("torch")
+    from benchmarks.torch_reference import main
+
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    assert capsys.readouterr().out.startswith("usage: benchmarks.torch_reference ")
