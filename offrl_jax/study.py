@@ -17,6 +17,16 @@ from offrl_jax.envs import get_env_spec
 from offrl_jax.provenance import run_record
 
 
+def check_file_name(what: str, value: object) -> None:
+    """Raise ValueError unless `value` can name a file or folder inside a run directory: a non-empty string, one
+    path component (no / or \\, not . or ..), no control characters.  A study's name and a variant's label do;
+    a saved config.json edited to "../elsewhere" must not write outside its run."""
+    if (not isinstance(value, str) or not value.strip() or value in (".", "..") or any(c in value for c in "/\\")
+            or any(ord(c) < 32 or ord(c) == 127 for c in value)):
+        raise ValueError(f"{what} = {value!r} must be a non-empty name without /, \\ or control characters, not . "
+                         "or .. (it names files in the run directory)")
+
+
 @dataclasses.dataclass(frozen=True)
 class Variant:
     label: str  # unique, used in files: "pretrained", "scratch", "lambda=0.1", ...
@@ -24,8 +34,7 @@ class Variant:
     overrides: tuple[tuple[str, Any], ...] = ()  # config overrides as (name, value) pairs
 
     def __post_init__(self):
-        if not isinstance(self.label, str) or not self.label.strip():
-            raise ValueError(f"Variant.label = {self.label!r} must be a non-empty string (it names files)")
+        check_file_name("Variant.label", self.label)
         try:  # as from_json gives them back: (name, value) tuples, a list value as a tuple (hashable, comparable)
             pairs = tuple((name, tuple(x) if isinstance(x, list) else x) for name, x in self.overrides)
         except (TypeError, ValueError):
@@ -67,6 +76,7 @@ class Study:
         for name in ("name", "dataset", "env"):
             if not isinstance(getattr(self, name), str):
                 raise ValueError(f"Study.{name} = {getattr(self, name)!r} must be a string")
+        check_file_name("Study.name", self.name)
         for name in ("clip_actions", "vmap_sweeps"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"Study.{name} = {getattr(self, name)!r} must be True or False")

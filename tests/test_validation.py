@@ -94,6 +94,8 @@ def test_config_takes_json_forms_and_stores_the_declared_types(algo, overrides, 
     ({"keep_checkpoints": 1.5}, "Study.keep_checkpoints = 1.5 must be an integer >= 0"),
     ({"updates": 2**31}, "must be a positive integer below 2**31"),
     ({"seeds": ()}, "Study.seeds must not be empty"),
+    ({"name": "../escaped"}, "Study.name = '../escaped' must be a non-empty name without /"),
+    ({"name": "/tmp/anywhere"}, "Study.name = '/tmp/anywhere' must be a non-empty name without /"),
     ({"seeds": ("abc",)}, "must be integers in [0, 2**31)"),
     ({"updates": 100.5}, "Study.updates = 100.5 must be a positive integer"),
     ({"env": "cartpole"}, "unknown env 'cartpole'; valid: hopper"),
@@ -118,6 +120,7 @@ def test_config_takes_json_forms_and_stores_the_declared_types(algo, overrides, 
     ({"variants": (Variant.of("a", "td3bc", alpha=True),)}, "TD3BCConfig.alpha = True must be a number"),
 ])
 def test_study_rejects(fields, message):
+    """(A study's name names its folder in a multi-study run: "../elsewhere" or "/abs" would write outside it.)"""
     base = dict(name="s", dataset="hopper-medium", env="hopper", variants=(Variant.of("a", "td3bc"),))
     with pytest.raises(ValueError, match=None) as err:
         Study(**(base | fields))
@@ -125,9 +128,11 @@ def test_study_rejects(fields, message):
 
 
 @pytest.mark.parametrize("make, message", [
-    (lambda: Variant.of("", "td3bc"), "Variant.label = '' must be a non-empty string"),
-    (lambda: Variant.of("  ", "td3bc"), "Variant.label = '  ' must be a non-empty string"),
-    (lambda: Variant(None, "td3bc"), "Variant.label = None must be a non-empty string"),
+    (lambda: Variant.of("", "td3bc"), "Variant.label = '' must be a non-empty name"),
+    (lambda: Variant.of("  ", "td3bc"), "Variant.label = '  ' must be a non-empty name"),
+    (lambda: Variant(None, "td3bc"), "Variant.label = None must be a non-empty name"),
+    (lambda: Variant.of("a/b", "td3bc"), "Variant.label = 'a/b' must be a non-empty name without /"),
+    (lambda: Variant.of("..", "td3bc"), "Variant.label = '..' must be a non-empty name without /"),
     (lambda: Variant("a", "td3bc", (("alpha",),)), "Variant.overrides = (('alpha',),) must be (name, value) pairs"),
     (lambda: Variant("a", "td3bc", ((1, 2.5),)), "Variant.overrides = ((1, 2.5),) must be (name, value) pairs"),
 ])
