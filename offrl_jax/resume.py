@@ -1,8 +1,8 @@
 """A resume continues the run its files belong to, or changes nothing.
 
 Every checkpoint carries the identity of what made it: the group's variants and resolved configs, the seeds, the
-batch size and the dataset's SHA-256 (`group_identity`).  Before a resumed study writes anything, `check_resume`
-reads every group's checkpoint and refuses, with one line, one that
+batch size, the evaluation interval and episodes, and the dataset's SHA-256 (`group_identity`).  Before a resumed
+study writes anything, `check_resume` reads every group's checkpoint and refuses, with one line, one that
 
 - was made by another run (its identity differs: another config.json, other hidden sizes, other data; the
   message names what differs, and a config field added to the code since is no difference at its default),
@@ -57,7 +57,8 @@ def group_identity(study: Study, group: tuple[Variant, ...], data_sha256: str) -
     resolved = study.resolved()
     identity = {"variants": [[v.label, v.algo, [list(o) for o in v.overrides]] for v in group],
                 "resolved": [resolved[v.label] for v in group], "seeds": list(study.seeds),
-                "batch_size": study.batch_size, "env": study.env, "data": data_sha256}
+                "batch_size": study.batch_size, "env": study.env, "data": data_sha256,
+                "evaluation": {"eval_every": study.eval_every, "eval_episodes": study.eval_episodes}}
     return json.loads(json.dumps(identity, default=list))  # tuples as lists, as they come back from a file
 
 
@@ -65,8 +66,9 @@ def identity_differences(saved: dict[str, Any], current: dict[str, Any], config_
     """What differs between a checkpoint's identity and the study's, by name.  A config field the checkpoint does
     not know (added to the code since) is no difference while the study keeps its default."""
     names = {"variants": "variants", "seeds": "seeds", "batch_size": "batch size", "env": "env",
-             "data": "dataset (SHA-256)"}
-    found = [name for key, name in names.items() if saved.get(key) != current.get(key)]
+             "data": "dataset (SHA-256)", "evaluation": "evaluation interval or episodes"}
+    found = [name for key, name in names.items()  # (checkpoints before 2026-12-02 did not record their evaluation)
+             if saved.get(key) != current.get(key) and not (key == "evaluation" and key not in saved)]
     for j, (old, new) in enumerate(zip(saved.get("resolved", []), current["resolved"])):
         label = current["variants"][j][0]
         for key in sorted(set(old) | set(new)):

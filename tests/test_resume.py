@@ -54,7 +54,8 @@ def test_an_edited_config_is_refused_naming_what_differs_and_nothing_changes(hal
 
 
 @pytest.mark.parametrize("change, named", [({"seeds": (0, 2)}, "seeds"), ({"batch_size": 16}, "batch size"),
-                                           ("data", "dataset")])
+                                           ("data", "dataset"), ({"eval_episodes": 3}, "evaluation"),
+                                           ({"eval_every": 50}, "evaluation")])
 def test_a_checkpoint_of_another_run_is_refused_and_nothing_changes(half_run, tmp_path, change, named):
     run = resumed_copy(half_run, tmp_path)
     before = digest(run)
