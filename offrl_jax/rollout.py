@@ -52,7 +52,13 @@ def rollout(policy, episodes: int, video: Path | None = None, max_frames: int | 
             import imageio.v2 as imageio
 
             video.parent.mkdir(parents=True, exist_ok=True)
-            imageio.mimwrite(video, frames, fps=env.metadata.get("render_fps", 30))
+            # written beside it, then renamed: a failed write leaves no half-written video and keeps an old one
+            tmp = video.with_name(f".{video.stem}.{os.getpid()}{video.suffix}")
+            try:
+                imageio.mimwrite(tmp, frames, fps=env.metadata.get("render_fps", 30))
+                os.replace(tmp, video)
+            finally:
+                tmp.unlink(missing_ok=True)
     finally:
         env.close()
     return np.asarray(returns)
@@ -78,6 +84,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--episodes", type=positive_int, default=3, help="episodes to roll out (default %(default)s)")
     p.add_argument("--video", type=Path, default=None, help="write the episodes as a video (.mp4 or .gif)")
     p.add_argument("--max-frames", type=positive_int, default=None, help="stop recording after this many frames")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing --video file")
     args = p.parse_args(argv)
     one_line_warnings()
     try:
@@ -90,6 +97,8 @@ def main(argv: list[str] | None = None) -> int:
                 except ImportError:
                     raise ValueError("an .mp4 needs imageio-ffmpeg (pip install -e \".[video]\"); or write a .gif") \
                         from None
+            if args.video.exists() and not args.video.is_dir() and not args.overwrite:
+                raise ValueError(f"{args.video} exists; pass --overwrite to replace it")
             check_writable_file(args.video)
             os.environ.setdefault("MUJOCO_GL", "egl")  # before MuJoCo is imported
         from offrl_jax.envs import normalized_score

@@ -27,7 +27,6 @@ import dataclasses
 import functools
 import json
 import signal
-import sys
 import time
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -40,7 +39,15 @@ import optax
 
 from offrl_jax import losses
 from offrl_jax.checkpoint import atomic_write_bytes, atomic_write_text
-from offrl_jax.cli import OneLineParser, print_error
+from offrl_jax.cli import (
+    OneLineParser,
+    check_writable_dir,
+    int_at_least,
+    number,
+    positive_int,
+    print_error,
+    seed_int,
+)
 from offrl_jax.data.generate.collect import ACTOR_HIDDEN, actor_module, evaluate, make_gen_env
 from offrl_jax.data.generate.replay import ReplayBuffer, chunk_range, load_replay
 from offrl_jax.envs import get_env_spec, normalized_score
@@ -179,19 +186,22 @@ def train(
     """
     out = Path(out_dir)
     if resume:
-        run, saved = _resume_info(out)
+        run, saved, cfg = _resume_info(out)
         start = int(saved["step"])
         env_name, seed, eval_every, eval_episodes = run["env"], run["seed"], run["eval_every"], run["eval_episodes"]
-        cfg = SACConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in run["config"].items()})
         steps = max(steps or run["steps"], start)
         run |= {"steps": steps, "stopped": "running", "resumed_at": run.get("resumed_at", []) + [start]}
         run["checkpoints"] = [c for c in run["checkpoints"] if c["step"] <= start]
+    else:
+        check_new_run(out)
     spec = get_env_spec(env_name)
+    try:
+        buffer = ReplayBuffer(spec.obs_dim, spec.act_dim, steps)
+    except MemoryError:
+        raise ValueError(f"{steps:,} steps: the replay of every transition does not fit in memory") from None
     (out / "checkpoints").mkdir(parents=True, exist_ok=True)
     (out / "replay").mkdir(exist_ok=True)
     if not resume:
-        if (out / "log.jsonl").exists() and (out / "log.jsonl").stat().st_size > 0:
-            raise FileExistsError(f"{out} already holds a SAC run (log.jsonl); use a new --out or --resume")
         run = {"env": spec.name, "gym_id": spec.gym_id, "seed": seed, "steps": steps,
                "config": dataclasses.asdict(cfg), "eval_every": eval_every, "eval_episodes": eval_episodes,
                "obs_dim": spec.obs_dim, "act_dim": spec.act_dim, "steps_done": 0, "stopped": "running",
@@ -204,7 +214,6 @@ def train(
     obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
     sac = make_sac(obs_dim, act_dim, cfg)
     state = sac.init(seed)
-    buffer = ReplayBuffer(obs_dim, act_dim, steps)
     rng = np.random.default_rng(seed)
     if resume:
         state = flax.serialization.from_bytes(state, (out / "state.msgpack").read_bytes())
@@ -305,11 +314,45 @@ def _save_state(out: Path, state: SACState, rng: np.random.Generator, step: int)
     atomic_write_text(out / "state.json", json.dumps({"step": step, "rng": rng.bit_generator.state}))
 
 
-def _resume_info(out: Path) -> tuple[dict[str, Any], dict[str, Any]]:
-    """(run.json, state.json: {"step", "rng"}) of a run to resume."""
-    if not (out / "run.json").exists() or not (out / "state.json").exists():
+def check_new_run(out: Path) -> None:
+    """Raise FileExistsError (one line) if `out` holds what a SAC run writes: a new run there would mix with it."""
+    out = Path(out)
+    if not out.is_dir():
+        return
+    found = [n for n in ("run.json", "state.json", "state.msgpack") if (out / n).exists()]
+    if (out / "log.jsonl").is_file() and (out / "log.jsonl").stat().st_size > 0:
+        found.append("log.jsonl")
+    found += [f"{d}/" for d in ("checkpoints", "replay") if (out / d).is_dir() and any((out / d).iterdir())]
+    if found:
+        raise FileExistsError(f"{out} already holds a SAC run ({', '.join(found)}); use a new --out or --resume")
+
+
+def _resume_info(out: Path) -> tuple[dict[str, Any], dict[str, Any], SACConfig]:
+    """(run.json, state.json: {"step", "rng"}, config) of a run to resume; ValueError (one line) for a directory
+    that holds no complete run to continue."""
+    if not (out / "run.json").is_file() or not (out / "state.json").is_file():
         raise FileNotFoundError(f"{out}: nothing to resume (needs run.json and state.json from a run of this version)")
-    return json.loads((out / "run.json").read_text()), json.loads((out / "state.json").read_text())
+    try:
+        run, saved = json.loads((out / "run.json").read_text()), json.loads((out / "state.json").read_text())
+        needed = {"run.json": (run, ("env", "seed", "steps", "eval_every", "eval_episodes", "config", "checkpoints")),
+                  "state.json": (saved, ("step", "rng"))}
+        for name, (content, keys) in needed.items():
+            if missing := [k for k in keys if k not in content]:
+                raise ValueError(f"{name} has no {', '.join(missing)}")
+        start = int(saved["step"])
+        get_env_spec(run["env"])
+        cfg = SACConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in run["config"].items()})
+        upto = 0  # replay chunks must cover the first `start` steps without a gap
+        for lo, hi in sorted(chunk_range(f) for f in (out / "replay").glob("*.npz")):
+            upto = hi if lo == upto else upto
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as e:
+        raise ValueError(f"{out}: not a SAC run that can be resumed ({type(e).__name__}: {e})") from None
+    if not (out / "state.msgpack").is_file():
+        raise FileNotFoundError(f"{out}: nothing to resume (state.msgpack is missing)")
+    if upto < start:
+        raise FileNotFoundError(f"{out}/replay holds the first {upto} transitions, not the {start} the saved state "
+                                "needs")
+    return run, saved, cfg
 
 
 def _reload_replay(out: Path, buffer: ReplayBuffer, start: int) -> None:
@@ -333,31 +376,53 @@ def _reload_replay(out: Path, buffer: ReplayBuffer, start: int) -> None:
         buffer.save_range(last, lo, start)
 
 
-def main(argv: list[str] | None = None) -> None:
-    p = OneLineParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def main(argv: list[str] | None = None) -> int:
+    p = OneLineParser(prog="offrl_jax.data.generate.sac", description=__doc__,
+                      formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--env", help="hopper | halfcheetah | walker2d (required unless --resume)")
-    p.add_argument("--steps", type=int, default=None, help="total env steps (default 1M; on --resume the run's own)")
-    p.add_argument("--out", help="run directory (must not hold a run already)")
-    p.add_argument("--resume", default=None, help="continue the run in this directory (--steps may extend it)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--eval-every", type=int, default=10_000)
-    p.add_argument("--eval-episodes", type=int, default=5)
-    p.add_argument("--warmup", type=int, default=SACConfig.warmup_steps)
-    p.add_argument("--stop-score", type=float, default=None, help="stop once the normalised eval score reaches this")
+    p.add_argument("--steps", type=positive_int, default=None,
+                   help="total env steps (default 1M; on --resume the run's own)")
+    p.add_argument("--out", type=Path, help="run directory (must not hold a run already)")
+    p.add_argument("--resume", type=Path, default=None,
+                   help="continue the run in this directory (--steps may extend it)")
+    p.add_argument("--seed", type=seed_int, default=None, help="default 0")
+    p.add_argument("--eval-every", type=positive_int, default=None,
+                   help="env steps between evaluations (default 10000)")
+    p.add_argument("--eval-episodes", type=positive_int, default=None, help="episodes per evaluation (default 5)")
+    p.add_argument("--warmup", type=int_at_least(0), default=None,
+                   help=f"uniform-random steps before the first update (default {SACConfig.warmup_steps})")
+    p.add_argument("--stop-score", type=number(), default=None, help="stop once the normalised eval score reaches this")
     p.add_argument("--no-progress", action="store_true")
     a = p.parse_args(argv)
-    if a.resume is None and (a.env is None or a.out is None):
-        p.error("--env and --out are required (or --resume DIR)")
-    cfg = SACConfig(warmup_steps=a.warmup)
+    settings = {"--env": a.env, "--out": a.out, "--seed": a.seed, "--eval-every": a.eval_every,
+                "--eval-episodes": a.eval_episodes, "--warmup": a.warmup}
+    try:
+        if a.resume is not None:
+            if given := [flag for flag, value in settings.items() if value is not None]:
+                p.error(f"{', '.join(given)}: a resumed run keeps its own settings; give only --resume DIR "
+                        "(and --steps, --stop-score)")
+            _resume_info(a.resume)
+            check_writable_dir(a.resume)
+        else:
+            if missing := [flag for flag in ("--env", "--out") if settings[flag] is None]:
+                p.error(f"{' and '.join(missing)} {'is' if len(missing) == 1 else 'are'} required (or --resume DIR)")
+            get_env_spec(a.env)
+            check_new_run(a.out)
+            check_writable_dir(a.out)
+    except (OSError, ValueError) as e:
+        p.error(str(e))
+    cfg = SACConfig(warmup_steps=SACConfig.warmup_steps if a.warmup is None else a.warmup)
     steps = a.steps if a.steps is not None or a.resume else 1_000_000
     try:
-        run = train(a.env, steps, a.resume or a.out, a.seed, cfg, a.eval_every, a.eval_episodes, a.stop_score,
-                    not a.no_progress, resume=a.resume is not None)
+        run = train(a.env, steps, a.resume or a.out, 0 if a.seed is None else a.seed, cfg,
+                    a.eval_every or 10_000, a.eval_episodes or 5, a.stop_score, not a.no_progress,
+                    resume=a.resume is not None)
     except (FileNotFoundError, FileExistsError, ValueError) as e:
         print_error(e)
-        sys.exit(2)
+        return 2
     best = max(run["checkpoints"], key=lambda c: c["eval_return"], default=None)
     print(json.dumps({"steps_done": run["steps_done"], "stopped": run["stopped"], "best": best}))
+    return 0
 
 
 if __name__ == "__main__":
