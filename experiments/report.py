@@ -29,7 +29,7 @@ from pathlib import Path
 from experiments.common import OneLineParser
 from offrl_jax.cli import check_writable_dir, check_writable_file, print_error
 from offrl_jax.figures import plot_studies
-from offrl_jax.results import merge_runs, read_curves, summary_table as table
+from offrl_jax.results import check_curve_seeds, merge_runs, read_curves, summary_table as table
 from offrl_jax.study import Study
 
 
@@ -76,12 +76,16 @@ def check_run(path: Path, summary: list[dict]) -> None:
             raise ValueError(f"{path} does not belong with {run / 'config.json'}: other seeds")
     if (run / "curves.csv").is_file():
         rows = read_curves(run / "curves.csv")
+        if (run / "config.json").is_file():
+            check_curve_seeds(run / "curves.csv", rows, study.seeds)
         extra = {r["variant"] for r in rows if "variant" in r} - known
         if extra:
             raise ValueError(f"{run / 'curves.csv'} holds variant(s) of another run: {', '.join(sorted(extra))}")
         for s in summary:
             last = max((r["update"] for r in rows if r.get("variant") == s["variant"] and "update" in r), default=None)
-            if last is None or (isinstance(s.get("updates"), int) and last < s["updates"]):
+            if last is None:
+                raise ValueError(f"{run / 'curves.csv'} has no evaluation of {s['variant']}, which {path} reports")
+            if isinstance(s.get("updates"), int) and last < s["updates"] - 1:  # TD3 may trim an odd budget by 1
                 raise ValueError(f"{run / 'curves.csv'}: {s['variant']}'s evaluations end at update {last}, before "
                                  f"the {s.get('updates')} updates of {path} (a truncated file?)")
 
@@ -139,6 +143,8 @@ def main(argv=None) -> int:
                     raise ValueError(f"{path}: not a run's summary (missing or empty {e})") from None
                 print(f"### {path.parent}\n\n{text}\n")
                 if args.curves:
+                    if not (path.parent / "curves.csv").is_file():
+                        raise FileNotFoundError(f"{path.parent}: no curves.csv, which --curves reads")
                     print(curve_table(path.parent / "curves.csv") + "\n")
                 study_dirs.append(path.parent)
         if args.plot is not None:

@@ -48,6 +48,9 @@ def read_curves(path: Path) -> list[dict]:
     at: dict[tuple, set] = {}
     for r in rows:
         if "variant" in r and "seed" in r and "update" in r:
+            if r["seed"] in at.get((r["variant"], r["update"]), ()):
+                raise ValueError(f"{path}: {r['variant']} seed {r['seed']} has two rows at update {r['update']} "
+                                 "(rows of two runs mixed?)")
             seeds.setdefault(r["variant"], set()).add(r["seed"])
             at.setdefault((r["variant"], r["update"]), set()).add(r["seed"])
     for (variant, update), have in at.items():
@@ -55,6 +58,15 @@ def read_curves(path: Path) -> list[dict]:
             raise ValueError(f"{path}: {variant} at update {update} has no row for seed(s) "
                              f"{', '.join(map(str, sorted(seeds[variant] - have)))} (a truncated or edited file?)")
     return rows
+
+
+def check_curve_seeds(path: Path, rows: list[dict], seeds) -> None:
+    """Raise ValueError (one line) if a variant of curves.csv rows holds other seeds than its run's `seeds`."""
+    for variant in sorted({r["variant"] for r in rows if "variant" in r}):
+        found = {r["seed"] for r in rows if r.get("variant") == variant and "seed" in r}
+        if found != set(seeds):
+            raise ValueError(f"{path}: {variant} has seeds {', '.join(map(str, sorted(found)))} where its run has "
+                             f"{', '.join(map(str, seeds))} (rows of another run?)")
 
 
 def pretrain_ends_of(rows: list[dict]) -> dict[str, int]:
@@ -98,6 +110,7 @@ def merge_runs(run_dirs: list[Path], out_dir: Path) -> list[dict]:
     rows = []
     for d, s in zip(run_dirs, studies):
         mine = read_curves(d / "curves.csv")
+        check_curve_seeds(d / "curves.csv", mine, s.seeds)
         last = {v.label: max((r["update"] for r in mine if r.get("variant") == v.label), default=0) for v in s.variants}
         short = {label: u for label, u in last.items() if u < s.updates - 1}  # TD3 may trim an odd budget by 1
         if short:

@@ -212,6 +212,11 @@ RUN = Path(__file__).resolve().parents[1] / "results" / "mujoco_medium" / "defau
     (lambda run: (run / "config.json").write_text('{"name": 1}'), "not a saved study"),
     (lambda run: (run / "curves.csv").write_text((run / "curves.csv").read_text().replace("\nscratch,", "\nx,")),
      "another run"),
+    (lambda run: (run / "curves.csv").write_text((run / "curves.csv").read_text()
+                                                 + "".join((run / "curves.csv").read_text().splitlines(True)[1:])),
+     "has two rows at update"),  # the file appended to itself
+    (lambda run: (run / "curves.csv").write_text((run / "curves.csv").read_text().replace(",td3bc,1,", ",td3bc,7,")),
+     "has seeds 0, 2, 7 where its run has 0, 1, 2"),  # a seed relabelled
 ])
 def test_report_reads_a_run_as_a_whole(tmp_path, capsys, damage, message):
     """report RUN checks the summary against the run's config.json and curves.csv: a damaged or mixed run is one

@@ -234,3 +234,16 @@ def test_merge_refuses_a_run_whose_curves_end_early(tmp_path, capsys):
                      "seconds": 1.0, "score": 1.0}])
     assert report.main(["--merge", str(tmp_path / "m"), str(run)]) == 2
     assert "ends before the run's 200 updates (scratch at 100)" in capsys.readouterr().err
+
+
+def test_merge_refuses_a_run_whose_curves_hold_other_seeds(tmp_path, capsys):
+    from experiments import report
+
+    common = dict(name="t", dataset="hopper-medium", env="hopper", seeds=(0, 1), updates=100, eval_every=100)
+    scratch = (Variant.of("scratch", "td3bc", pretrain="none"),)
+    rows = [{"variant": "scratch", "algo": "td3bc", "seed": seed, "phase": "offline_rl", "update": 100,
+             "seconds": 1.0, "score": 1.0} for seed in (0, 7)]  # seed 1 relabelled 7
+    run = _run_dir(tmp_path / "a", Study(variants=scratch, reference="scratch", **common), rows)
+    assert report.main(["--merge", str(tmp_path / "m"), str(run)]) == 2
+    assert "scratch has seeds 0, 7 where its run has 0, 1" in capsys.readouterr().err
+    assert not (tmp_path / "m").exists()
