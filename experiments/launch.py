@@ -15,7 +15,7 @@ import sys
 from pathlib import Path
 
 from offrl_jax.cli import UsageError
-from offrl_jax.workers import cpu_flags, process_cores
+from offrl_jax.workers import USER_XLA_FLAGS, cpu_flags, process_cores
 
 
 def use_cpu_cores() -> None:
@@ -37,8 +37,10 @@ def check_backend() -> None:
         jax.devices()
     except RuntimeError as e:
         first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
-        raise UsageError(f"JAX could not start ({first[:200]}); XLA_FLAGS={os.environ.get('XLA_FLAGS', '')!r}") \
-            from None
+        given = {name: os.environ.get(USER_XLA_FLAGS if name == "XLA_FLAGS" else name, os.environ.get(name, ""))
+                 for name in ("JAX_PLATFORMS", "XLA_FLAGS")}  # the user's own (the command adds CPU flags)
+        said = "; ".join(f"{name}={value!r}" for name, value in given.items() if value)
+        raise UsageError(f"JAX could not start ({first[:200]}){'; ' + said if said else ''}") from None
 
 
 def start_processes(args) -> bool:

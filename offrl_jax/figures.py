@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from offrl_jax.checkpoint import atomic_write_bytes
-from offrl_jax.results import ci95, read_curves, score_matrix
+from offrl_jax.results import all_nan_expected, ci95, read_curves, score_matrix
 
 ALGO_NAMES = {"td3bc": "TD3+BC", "edac": "EDAC", "td3bc_cql": "TD3+BC+CQL", "edac_bc": "EDAC+BC", "bc": "BC",
               "cql": "CQL", "sacn": "SAC-N"}
@@ -76,10 +76,11 @@ def plot_studies(study_dirs: list[Path], path: Path, reference: bool = True, ove
             if not len(updates):
                 continue
             color = f"C{len(ax.get_lines()) if overlay else i}"
-            mean = np.nanmean(scores, axis=0)
-            half = np.array([ci95(scores[:, j]) for j in range(len(updates))])
-            low = np.maximum(mean - half, np.nanmin(scores, axis=0))
-            high = np.minimum(mean + half, np.nanmax(scores, axis=0))
+            with all_nan_expected():
+                mean = np.nanmean(scores, axis=0)
+                half = np.array([ci95(scores[:, j]) for j in range(len(updates))])
+                low = np.maximum(mean - half, np.nanmin(scores, axis=0))
+                high = np.minimum(mean + half, np.nanmax(scores, axis=0))
             label = f"{study_dir.name}: {entry['variant']}" if overlay else entry["variant"]
             ax.plot(updates, mean, color=color, label=label)
             ax.fill_between(updates, low, high, color=color, alpha=0.2)

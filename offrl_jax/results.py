@@ -3,6 +3,7 @@ peak and fall), its confidence intervals, the plot and the printed table, and me
 """
 from __future__ import annotations
 
+import contextlib
 import csv
 import dataclasses
 import io
@@ -165,9 +166,17 @@ def summarize(study: Study, rows: list[dict], pretrain_ends: dict[str, int]) -> 
     """Per variant: final score (per seed, the mean of the last 10 % of evaluations, or of those inside
     `final_window`; then mean and 95 % CI over seeds), the from-scratch asymptote, and the first evaluation at which
     the seed-mean reaches 90 % of it (in a sweep: of the reference with the same swept value)."""
-    with warnings.catch_warnings():  # NaN means of all-NaN data (no reference, every seed diverged) are expected
-        warnings.simplefilter("ignore", RuntimeWarning)
+    with all_nan_expected():
         return _summarize(study, rows, pretrain_ends)
+
+
+@contextlib.contextmanager
+def all_nan_expected():
+    """No RuntimeWarning for the NaN means of all-NaN data (no reference, every seed diverged there): a NaN in a
+    summary, a gap in a curve."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        yield
 
 
 def _summarize(study: Study, rows: list[dict], pretrain_ends: dict[str, int]) -> list[dict]:
@@ -237,6 +246,7 @@ def _trend(curve: np.ndarray) -> float | None:
     return float(np.nanmean(curve[-k:]) - np.nanmean(curve[-2 * k:-k]))
 
 
+@all_nan_expected()
 def plot_curves(path: Path, study: Study, rows: list[dict], pretrain_ends: dict[str, int]) -> None:
     import matplotlib
 
