@@ -13,9 +13,15 @@ ROOT = Path(__file__).resolve().parents[1]
 ENV = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "OFFRL_JAX_USER_XLA_FLAGS")}
 
 
+# Python with Ctrl-C at its default even when the tests run where it is ignored (a background job of a shell):
+# the first interpreter resets it and becomes the second (no preexec_fn: forking a process that holds JAX warns)
+PYTHON = [sys.executable, "-c", "import os, signal, sys; signal.signal(signal.SIGINT, signal.SIG_DFL); "
+          "os.execv(sys.executable, [sys.executable, *sys.argv[1:]])"]
+
+
 def python(code: str, **env) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120,
-                          env=ENV | env, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    return subprocess.run([*PYTHON, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120,
+                          env=ENV | env)
 
 
 def one_line(stderr: str) -> str:
@@ -76,9 +82,8 @@ def test_ctrl_c_inside_an_import_or_a_gc_callback_comes_again_after_it():
 
 
 def test_a_real_command_interrupted_early_is_one_line():
-    proc = subprocess.Popen([sys.executable, "-m", "experiments.theory"], cwd=ROOT, env=ENV, text=True,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    proc = subprocess.Popen([*PYTHON, "-m", "experiments.theory"], cwd=ROOT, env=ENV, text=True,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     time.sleep(0.4)  # importing, or already working: either way one line
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=120)
