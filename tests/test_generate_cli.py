@@ -79,6 +79,19 @@ def test_sac_refuses_bad_input_before_writing_anything(tmp_path, capsys, args, m
     assert tree(tmp_path) == before
 
 
+def test_sac_refuses_a_run_directory_another_process_writes(tmp_path, capsys):
+    from offrl_jax.cli import lock_run_dir
+
+    held = lock_run_dir(tmp_path / "out")  # as a running `sac --out tmp/out` holds it
+    try:
+        before = tree(tmp_path)
+        assert "being written by another process" in refused(
+            sac.main, ["--env", "hopper", "--steps", "10", "--out", tmp_path / "out"], capsys)
+        assert tree(tmp_path) == before
+    finally:
+        held.close()
+
+
 def test_sac_refuses_more_steps_than_memory_holds_before_writing(tmp_path, capsys, monkeypatch):
     def no_memory(*args):
         raise MemoryError

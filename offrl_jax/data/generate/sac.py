@@ -43,6 +43,7 @@ from offrl_jax.cli import (
     OneLineParser,
     check_writable_dir,
     int_at_least,
+    lock_run_dir,
     number,
     positive_int,
     print_error,
@@ -409,6 +410,7 @@ def main(argv: list[str] | None = None) -> int:
             get_env_spec(a.env)
             check_new_run(a.out)
             check_writable_dir(a.out)
+        lock = lock_run_dir(a.resume or a.out)  # one process writes a run directory at a time
     except (OSError, ValueError) as e:
         p.error(str(e))
     cfg = SACConfig(warmup_steps=SACConfig.warmup_steps if a.warmup is None else a.warmup)
@@ -420,6 +422,9 @@ def main(argv: list[str] | None = None) -> int:
     except (FileNotFoundError, FileExistsError, ValueError) as e:
         print_error(e)
         return 2
+    finally:
+        Path(lock.name).unlink(missing_ok=True)
+        lock.close()
     best = max(run["checkpoints"], key=lambda c: c["eval_return"], default=None)
     print(json.dumps({"steps_done": run["steps_done"], "stopped": run["stopped"], "best": best}))
     return 0
