@@ -19,8 +19,11 @@ from offrl_jax.checkpoint import atomic_write_bytes, atomic_write_text
 from offrl_jax.study import Study, reference_label
 
 
+CURVE_COLUMNS = ("variant", "algo", "seed", "phase", "update", "seconds", "score")  # then each metric logged
+
+
 def write_curves(path: Path, rows: list[dict]) -> None:
-    columns = list(dict.fromkeys(k for row in rows for k in row))
+    columns = list(dict.fromkeys([*CURVE_COLUMNS, *(k for row in rows for k in row)]))  # a header even without rows
     buffer = io.StringIO()
     writer = csv.DictWriter(buffer, fieldnames=columns, restval="")
     writer.writeheader()
