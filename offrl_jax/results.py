@@ -18,7 +18,6 @@ from offrl_jax.algos import make_config
 from offrl_jax.checkpoint import atomic_write_bytes, atomic_write_text
 from offrl_jax.study import Study, reference_label
 
-
 CURVE_COLUMNS = ("variant", "algo", "seed", "phase", "update", "seconds", "score")  # then each metric logged
 
 
