@@ -1,7 +1,8 @@
 """Ctrl-C in a command, at any moment: one line and exit 130, never a traceback and never lost.
 
 `quiet_start` (called by the `__init__` of each package that holds commands, so this module imports nothing heavy)
-covers the imports before a command's `main`: a Ctrl-C there ends the process at once.  `during_command` is the
+covers the imports before a command's `main`: a Ctrl-C there ends the process at once, and an exception there (a
+JAX environment variable JAX cannot read) is one line.  `during_command` is the
 handler from `offrl_jax.cli.run_main` on: Ctrl-C raises KeyboardInterrupt, which the command handles (a training
 run stops at its next chunk boundary), except where Python would lose it or a C extension could crash on it: inside
 an import (JAX imported lazily: a half-initialised extension aborts the process or leaves an ImportError) or inside
@@ -29,6 +30,19 @@ def quiet_start() -> None:
     for any other purpose, or a process that ignores Ctrl-C, is left as it is."""
     if sys.argv[:1] == ["-m"] and signal.getsignal(signal.SIGINT) is signal.default_int_handler:
         signal.signal(signal.SIGINT, _interrupted_while_starting)
+    if sys.argv[:1] == ["-m"] and sys.excepthook is sys.__excepthook__:
+        sys.excepthook = _could_not_start
+
+
+def _could_not_start(kind, value, tb) -> None:
+    """An exception while the command's modules import is the environment's (a JAX variable JAX cannot read, a
+    broken install), not the command's: one line, unless OFFRL_JAX_DEBUG=1 asks for the traceback."""
+    if os.environ.get("OFFRL_JAX_DEBUG") == "1":
+        sys.__excepthook__(kind, value, tb)
+        return
+    text = " ".join(str(value).split())
+    sys.stderr.write(f"error: the command could not start: {kind.__name__}: {text[:300]} (OFFRL_JAX_DEBUG=1 shows "
+                     "where)\n")
 
 
 def _unsafe(frame) -> bool:
@@ -78,3 +92,5 @@ def hand_over() -> None:
     """From `run_main`: the command's own Ctrl-C handling (`during_command`) replaces `quiet_start`'s."""
     if signal.getsignal(signal.SIGINT) in (_interrupted_while_starting, signal.default_int_handler):
         signal.signal(signal.SIGINT, during_command)
+    if sys.excepthook is _could_not_start:  # the command reports its own errors from here on
+        sys.excepthook = sys.__excepthook__

@@ -108,3 +108,12 @@ def test_xla_flags_jax_cannot_start_with_are_one_line(tmp_path, module, flags, s
     line = one_line(result.stderr)
     assert line.startswith(f"error: JAX cannot start with XLA_FLAGS={flags!r}") and said in line
     assert not list(tmp_path.iterdir())
+
+
+def test_an_environment_jax_cannot_import_with_is_one_line(tmp_path):
+    """JAX reads its own variables when it is imported, before a command's main: one line, not a traceback."""
+    result = subprocess.run([sys.executable, "-m", "experiments.theory", "--help"], cwd=tmp_path, capture_output=True,
+                            text=True, timeout=120, env=ENV | {"JAX_ENABLE_X64": "garbage", "PYTHONPATH": str(ROOT)})
+    assert result.returncode != 0 and not result.stdout
+    line = one_line(result.stderr)
+    assert line.startswith("error: the command could not start: ValueError:") and "JAX_ENABLE_X64" in line
