@@ -38,7 +38,7 @@ from offrl_jax.provenance import fingerprint
 from offrl_jax.results import print_table
 from offrl_jax.resume import check_resume
 from offrl_jax.runner import Diverged, run_study
-from offrl_jax.study import Study, Variant
+from offrl_jax.study import Study, Variant, check_file_name
 
 
 def output_dir(args, study_name: str) -> tuple[Path, bool]:
@@ -77,23 +77,39 @@ def output_dir(args, study_name: str) -> tuple[Path, bool]:
     return args.out, False
 
 
-# what a run writes in its directory (offrl_jax/runner.py, offrl_jax/loggers.py)
-RUN_ENTRIES = frozenset({"config.json", "curves.csv", "curves.png", "summary.json", "checkpoints", "tensorboard",
-                         "wandb", "wandb-run-id"})
+# what a run writes in its directory (offrl_jax/runner.py, offrl_jax/loggers.py, offrl_jax/checkpoint.py)
+RUN_FILES = frozenset({"config.json", "curves.csv", "curves.png", "summary.json", "wandb-run-id"})
+RUN_FOLDERS = {"checkpoints": lambda name: name.endswith(".msgpack"),  # <variant>[.best|.<update>].msgpack
+               "tensorboard": lambda name: name.startswith("events.out.tfevents."),
+               "wandb": None}  # wandb's own folder (`--logger wandb`), whatever it holds
+
+
+def _temporary(name: str) -> bool:
+    """A temporary file of an atomic write a killed run left (`.<name>.<random>.tmp`)."""
+    return name.startswith(".") and name.endswith(".tmp")
 
 
 def not_from_a_run(out: Path, saved: Study | list[Study]) -> list[str]:
-    """The entries of run directory `out` that no run writes (a study's sub-directory of a multi-study run holds a
-    run's entries), as paths relative to `out`: what --overwrite must not delete."""
+    """The entries of run directory `out` that no run writes, as paths relative to `out`: what --overwrite must not
+    delete.  A run's folders may hold only what the run puts there; a study's sub-directory of a multi-study run is
+    a run directory itself."""
     studies = {s.name for s in saved} if isinstance(saved, list) else set()
-    ours = lambda entry: entry.name in RUN_ENTRIES or (entry.name.startswith(".") and entry.name.endswith(".tmp"))  # noqa: E731
-    foreign = []
-    for entry in sorted(out.iterdir()):
-        if entry.name in studies and entry.is_dir():
-            foreign += [f"{entry.name}/{e.name}" for e in sorted(entry.iterdir()) if not ours(e)]
-        elif not ours(entry):
-            foreign.append(entry.name)
-    return foreign
+
+    def foreign(folder: Path, prefix: str, nested: bool) -> list[str]:
+        found = []
+        for entry in sorted(folder.iterdir()):
+            where = f"{prefix}{entry.name}"
+            if nested and entry.name in studies and entry.is_dir() and not entry.is_symlink():
+                found += foreign(entry, f"{where}/", False)
+            elif entry.name in RUN_FOLDERS and entry.is_dir() and not entry.is_symlink():
+                if entry.name != "wandb":  # wandb's own folder, whatever it holds
+                    found += [f"{where}/{e.name}" for e in sorted(entry.iterdir())
+                              if not (e.is_file() and (RUN_FOLDERS[entry.name](e.name) or _temporary(e.name)))]
+            elif not ((entry.name in RUN_FILES or _temporary(entry.name)) and entry.is_file()):
+                found.append(where)
+        return found
+
+    return foreign(out, "", True)
 
 
 def refuse_existing(parser: argparse.ArgumentParser, out: Path | None, overwrite: bool, names: tuple[str, ...]) -> None:
@@ -139,6 +155,8 @@ def saved_studies(out: Path, path: Path | None = None) -> Study | list[Study]:
         if all(isinstance(s, dict) for s in raw["studies"]):
             return [Study.from_json(json.dumps(s)) for s in raw["studies"]]
         # runs started before the top-level file held whole studies: only the studies begun have their config
+        for name in raw["studies"]:
+            check_file_name(f"{path}: a study's name", name)
         begun = [name for name in raw["studies"] if (out / name / "config.json").is_file()]
         if not begun:
             raise UsageError(f"{path}: none of its studies had begun; start the run again instead of resuming it")

@@ -182,13 +182,14 @@ def test_a_failed_run_leaves_no_folders_it_made_for_its_out(tmp_path):
 # ------------------------------------------------------------------------------------------- training runs
 
 
-@pytest.mark.parametrize("extra", ["README.md", "notes.txt", "mydir/"])
+@pytest.mark.parametrize("extra", ["README.md", "notes.txt", "mydir/", "checkpoints/mine.txt", "tensorboard/events.mine"])
 def test_overwrite_of_a_run_refuses_files_no_run_writes(tmp_path, extra):
     """A saved run with a file the user put there (a README, notes, a folder) is not a run --overwrite may delete."""
     out = tmp_path / "run"
     shutil.copytree(ROOT / "results" / "mujoco_medium" / "default-20261202b", out)
     if extra != "README.md":
         (out / "README.md").unlink()
+        (out / extra).parent.mkdir(exist_ok=True)
         (out / extra).mkdir() if extra.endswith("/") else (out / extra).write_text("mine\n")
     line = refused(tmp_path, "experiments.mujoco_medium", "--out", out, "--overwrite", "--updates", "20000")
     assert f"holds {extra.rstrip('/')}, which a run does not write" in line, line

@@ -210,3 +210,14 @@ def test_a_config_json_whose_records_have_the_wrong_shape_is_not_a_saved_study(f
     raw = json.loads(study.to_json()) | {field: value}
     with pytest.raises(ValueError, match=f"'{field}' must"):
         Study.from_json(json.dumps(raw))
+
+
+@pytest.mark.parametrize("name", ["../../elsewhere", "/abs", "."])
+def test_an_old_multi_study_config_refuses_a_name_outside_its_run(tmp_path, name):
+    import json
+
+    from experiments.common import saved_studies
+
+    (tmp_path / "config.json").write_text(json.dumps({"studies": [name]}))  # the old format: names only
+    with pytest.raises(UsageError, match="a study's name"):
+        saved_studies(tmp_path)
