@@ -241,3 +241,19 @@ def test_rollout_replaces_a_video_whole(tmp_path):
 
     assert len(imageio.mimread(video)) == 2
     assert [p.name for p in tmp_path.iterdir()] == ["old.gif"]
+
+
+def test_an_unstarted_sac_run_is_discarded_and_a_users_file_kept(tmp_path):
+    """Ctrl-C before a new SAC run saved its first state leaves nothing to resume: what it wrote goes, so the same
+    --out can start again; a file of the user's in --out stays."""
+    out = tmp_path / "out"
+    (out / "checkpoints").mkdir(parents=True)
+    (out / "replay").mkdir()
+    (out / "run.json").write_text("{}")
+    (out / "log.jsonl").write_text("")
+    (out / "notes.txt").write_text("mine")
+    sac.discard_unstarted(out)
+    assert sorted(p.name for p in out.iterdir()) == ["notes.txt"]
+    (out / "notes.txt").unlink()
+    sac.discard_unstarted(out)
+    assert not out.exists()

@@ -27,6 +27,7 @@ import dataclasses
 import functools
 import json
 import signal
+import sys
 import time
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -422,12 +423,35 @@ def main(argv: list[str] | None = None) -> int:
     except (FileNotFoundError, FileExistsError, ValueError) as e:
         print_error(e)
         return 2
+    except KeyboardInterrupt:  # before training began (its own Ctrl-C handling stops it at an evaluation)
+        if a.resume is None:
+            discard_unstarted(a.out)
+        raise
     finally:
         Path(lock.name).unlink(missing_ok=True)
         lock.close()
     best = max(run["checkpoints"], key=lambda c: c["eval_return"], default=None)
     print(json.dumps({"steps_done": run["steps_done"], "stopped": run["stopped"], "best": best}))
+    if run["stopped"] in ("SIGINT", "SIGTERM"):
+        print(f"interrupted; resume with --resume {a.resume or a.out}", file=sys.stderr)
+        return 130
     return 0
+
+
+def discard_unstarted(out: Path) -> None:
+    """Remove what a new run wrote in `out` before its first saved state (nothing there can be resumed), so that
+    the same --out can start again; files of others in `out` stay."""
+    if (out / "state.json").exists():
+        return
+    for name in ("run.json", "log.jsonl", "state.msgpack"):
+        (out / name).unlink(missing_ok=True)
+    for folder, pattern in (("checkpoints", "actor_*.msgpack"), ("replay", "*.npz")):
+        for f in (out / folder).glob(pattern):
+            f.unlink()
+        if (out / folder).is_dir() and not any((out / folder).iterdir()):
+            (out / folder).rmdir()
+    if out.is_dir() and not any(out.iterdir()):
+        out.rmdir()
 
 
 if __name__ == "__main__":
