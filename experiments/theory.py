@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from experiments.common import OneLineParser, refuse_existing
-from offrl_jax.checkpoint import atomic_write_text
+from offrl_jax.checkpoint import atomic_write_bytes, atomic_write_text
 from offrl_jax.cli import check_writable_dir, int_at_least, number, positive_int, seed_int
 
 OUTPUTS = ("rows.json", "summary.json", "theory.png")  # what --out gets (--overwrite replaces only these)
@@ -106,7 +106,10 @@ def table(rows: list[dict]) -> list[dict]:
     return out
 
 
-def plot(path: Path, summary: list[dict], gamma: float) -> None:
+def plot(summary: list[dict], gamma: float) -> bytes:
+    """The figure as PNG bytes (drawn before anything is written, so an interrupted run leaves no partial --out)."""
+    import io
+
     import matplotlib
 
     matplotlib.use("Agg")
@@ -126,8 +129,10 @@ def plot(path: Path, summary: list[dict], gamma: float) -> None:
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=120)
     plt.close(fig)
+    return buffer.getvalue()
 
 
 def _fmt(x: float | None) -> str:
@@ -164,10 +169,11 @@ def main(argv=None) -> int:
                  "||Q*||, so there is nothing to converge to; use a smaller eps")
     summary = table(rows)
     if args.out:
+        figure = plot(summary, args.gamma)  # everything ready first: the three files are written together
         args.out.mkdir(parents=True, exist_ok=True)
         atomic_write_text(args.out / "rows.json", json.dumps(rows, indent=1))
         atomic_write_text(args.out / "summary.json", json.dumps(summary, indent=2))
-        plot(args.out / "theory.png", summary, args.gamma)
+        atomic_write_bytes(args.out / "theory.png", figure)
     if args.json:
         print(json.dumps(summary))
         return 0
