@@ -193,6 +193,8 @@ def main(argv: list[str] | None = None) -> dict:
                 "github.com/EmptyJackson/unifloral)")
     if args.updates % 2:
         p.error(f"--updates {args.updates} must be even (one TD3+BC step = 2 critic updates)")
+    if not (args.unifloral / "algorithms" / "td3_bc.py").is_file():
+        p.error(f"{args.unifloral}: not a unifloral checkout (no algorithms/td3_bc.py)")
     if importlib.util.find_spec("distrax") is None:
         p.error("unifloral's td3_bc.py imports distrax, which is not installed: pip install distrax")
     out_path = results_path(p, args.out)
