@@ -29,7 +29,7 @@ from pathlib import Path
 from experiments.common import OneLineParser
 from offrl_jax.cli import check_writable_dir, check_writable_file, print_error
 from offrl_jax.figures import plot_studies
-from offrl_jax.results import check_curve_seeds, merge_runs, read_curves, summary_table as table
+from offrl_jax.results import check_curve_seeds, merge_runs, read_curves, short_curves, summary_table as table
 from offrl_jax.study import Study
 
 
@@ -81,13 +81,12 @@ def check_run(path: Path, summary: list[dict]) -> None:
         extra = {r["variant"] for r in rows if "variant" in r} - known
         if extra:
             raise ValueError(f"{run / 'curves.csv'} holds variant(s) of another run: {', '.join(sorted(extra))}")
-        for s in summary:
-            last = max((r["update"] for r in rows if r.get("variant") == s["variant"] and "update" in r), default=None)
+        budgets = {s["variant"]: s["updates"] if isinstance(s.get("updates"), int) else 0 for s in summary}
+        for variant, last in short_curves(rows, budgets).items():
             if last is None:
-                raise ValueError(f"{run / 'curves.csv'} has no evaluation of {s['variant']}, which {path} reports")
-            if isinstance(s.get("updates"), int) and last < s["updates"] - 1:  # TD3 may trim an odd budget by 1
-                raise ValueError(f"{run / 'curves.csv'}: {s['variant']}'s evaluations end at update {last}, before "
-                                 f"the {s.get('updates')} updates of {path} (a truncated file?)")
+                raise ValueError(f"{run / 'curves.csv'} has no evaluation of {variant}, which {path} reports")
+            raise ValueError(f"{run / 'curves.csv'}: {variant}'s evaluations end at update {last}, before the "
+                             f"{budgets[variant]} updates of {path} (a truncated file?)")
 
 
 def curve_table(curves: Path) -> str:

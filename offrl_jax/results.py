@@ -72,6 +72,14 @@ def check_curve_seeds(path: Path, rows: list[dict], seeds) -> None:
                              f"{', '.join(map(str, seeds))} (rows of another run?)")
 
 
+def short_curves(rows: list[dict], budgets: dict[str, int]) -> dict[str, int | None]:
+    """The variants whose evaluations in curves.csv `rows` end before their budget of updates (TD3 may trim an odd
+    budget by 1): {variant: its last evaluated update, None when it has none}."""
+    last = {label: max((r["update"] for r in rows if r.get("variant") == label and "update" in r), default=None)
+            for label in budgets}
+    return {label: u for label, u in last.items() if u is None or u < budgets[label] - 1}
+
+
 def pretrain_ends_of(rows: list[dict]) -> dict[str, int]:
     """Per variant, the last evaluation before offline RL (0 if none): what `run_study` records as its
     pre-training end (for BC, whose whole run is actor pre-training, the last evaluation)."""
@@ -114,11 +122,11 @@ def merge_runs(run_dirs: list[Path], out_dir: Path) -> list[dict]:
     for d, s in zip(run_dirs, studies):
         mine = read_curves(d / "curves.csv")
         check_curve_seeds(d / "curves.csv", mine, s.seeds)
-        last = {v.label: max((r["update"] for r in mine if r.get("variant") == v.label), default=0) for v in s.variants}
-        short = {label: u for label, u in last.items() if u < s.updates - 1}  # TD3 may trim an odd budget by 1
+        short = short_curves(mine, {v.label: s.updates for v in s.variants})
         if short:
             raise ValueError(f"{d / 'curves.csv'}: ends before the run's {s.updates:,} updates ("
-                             f"{', '.join(f'{label} at {u:,}' for label, u in short.items())}); merge finished runs")
+                             f"{', '.join(f'{label} at {u or 0:,}' for label, u in short.items())}); merge finished "
+                             "runs")
         rows += mine
     ends = pretrain_ends_of(rows)
     summary = summarize(study, rows, ends)
