@@ -1,6 +1,3 @@
-import sys as _sys
+from offrl_jax.interrupts import quiet_start as _quiet_start
 
-if _sys.argv[:1] == ["-m"]:  # one of this package's modules runs as a command: see offrl_jax.interrupts
-    from offrl_jax.interrupts import quiet_start as _quiet_start
-
-    _quiet_start()
+_quiet_start()  # only when one of this package's modules runs as a command (`python -m`): see offrl_jax.interrupts

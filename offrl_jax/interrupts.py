@@ -2,8 +2,8 @@
 
 `quiet_start` (called by the `__init__` of each package that holds commands, so this module imports nothing heavy)
 covers the imports before a command's `main`: a Ctrl-C there ends the process at once, and an exception there (a
-JAX environment variable JAX cannot read) is one line.  `during_command` is the
-handler from `offrl_jax.cli.run_main` on: Ctrl-C raises KeyboardInterrupt, which the command handles (a training
+JAX environment variable JAX cannot read) is one line.  `during_command` is the handler from `offrl_jax.cli.run_main`
+on: Ctrl-C raises KeyboardInterrupt, which the command handles (a training
 run stops at its next chunk boundary), except where Python would lose it or a C extension could crash on it: inside
 an import (JAX imported lazily: a half-initialised extension aborts the process or leaves an ImportError) or inside
 a callback whose exception Python prints and drops (JAX's garbage-collection callback, a weak reference's
@@ -28,9 +28,11 @@ def quiet_start() -> None:
     """When Python runs one of the package's modules as a command (`python -m ...`: sys.argv[0] is "-m" while the
     package imports), a Ctrl-C until `run_main` ends the process at once, with one line and exit 130.  An import
     for any other purpose, or a process that ignores Ctrl-C, is left as it is."""
-    if sys.argv[:1] == ["-m"] and signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+    if sys.argv[:1] != ["-m"]:
+        return
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
         signal.signal(signal.SIGINT, _interrupted_while_starting)
-    if sys.argv[:1] == ["-m"] and sys.excepthook is sys.__excepthook__:
+    if sys.excepthook is sys.__excepthook__:
         sys.excepthook = _could_not_start
 
 

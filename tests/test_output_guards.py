@@ -182,7 +182,8 @@ def test_a_failed_run_leaves_no_folders_it_made_for_its_out(tmp_path):
 # ------------------------------------------------------------------------------------------- training runs
 
 
-@pytest.mark.parametrize("extra", ["README.md", "notes.txt", "mydir/", "checkpoints/mine.txt", "tensorboard/events.mine"])
+@pytest.mark.parametrize("extra", ["README.md", "notes.txt", "mydir/", "checkpoints/mine.txt",
+                                   "tensorboard/events.mine"])
 def test_overwrite_of_a_run_refuses_files_no_run_writes(tmp_path, extra):
     """A saved run with a file the user put there (a README, notes, a folder) is not a run --overwrite may delete."""
     out = tmp_path / "run"
