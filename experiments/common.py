@@ -35,10 +35,10 @@ from offrl_jax.cli import (  # noqa: F401  (OneLineParser, positive_int, UsageEr
 )
 from offrl_jax.data.dataset import DatasetError
 from offrl_jax.provenance import fingerprint
-from offrl_jax.results import print_table
 from offrl_jax.resume import check_resume
 from offrl_jax.runner import Diverged, run_study
 from offrl_jax.study import Study, Variant, check_file_name
+from offrl_jax.summary import print_table
 
 
 def output_dir(args, study_name: str) -> tuple[Path, bool]:

@@ -154,10 +154,11 @@ def plain_path(text: str) -> Path:
     return Path(text)
 
 
-def run_args(parser: argparse.ArgumentParser, updates: int | None, eval_every: int | None, seeds: int = 3) -> None:
+def run_args(parser: argparse.ArgumentParser, updates: int | None, eval_every: int | None, seeds: int = 3,
+             eval_episodes: int = 10) -> None:
     """The run flags; `updates`/`eval_every` None leaves that flag out (a study that sets it itself)."""
     g = parser.add_argument_group("run")
-    g.add_argument("--seeds", type=positive_int, default=seeds, help="number of seeds, vmapped (default %(default)s)")
+    g.add_argument("--seeds", type=positive_int, default=seeds, help="number of seeds, the member axis of one program (default %(default)s)")
     g.add_argument("--seed-offset", type=seed_int, default=0, help="first seed (seeds are offset..offset+N-1)")
     if updates is not None:
         g.add_argument("--updates", type=positive_int, default=updates,
@@ -165,7 +166,7 @@ def run_args(parser: argparse.ArgumentParser, updates: int | None, eval_every: i
     if eval_every is not None:
         g.add_argument("--eval-every", type=positive_int, default=eval_every,
                        help="updates between evaluations (default %(default)s)")
-    g.add_argument("--eval-episodes", type=positive_int, default=10,
+    g.add_argument("--eval-episodes", type=positive_int, default=eval_episodes,
                    help="episodes per evaluation per seed (default %(default)s)")
     g.add_argument("--batch-size", type=positive_int, default=256)
     g.add_argument("--checkpoint-every", type=int_at_least(0), default=0,

@@ -1,11 +1,15 @@
 """The paper's central claim on D4RL-style MuJoCo data: offline RL with actor+critic pre-training versus without.
 
 Default (no arguments): hopper-medium (regenerated from the shipped behaviour policy and cached), TD3+BC with
-actor+critic pre-training (10k updates) vs from scratch, 3 vmapped seeds, 70k updates each (pre-training included),
-evaluated every 5k updates (10 episodes, deterministic policy, D4RL-normalised); the two variants train at once
-(`--parallel 2`).  TD3+BC's alpha is 2.5 here (TD3+BC's published default, with which the from-scratch baseline
-learns on this data); the paper's per-env alphas (hopper 10) come with `--preset authors` or `--alpha 10`.
-See RESULTS.md for the measured wall-clock time and for what happens with longer budgets.
+actor+critic pre-training (10k updates) vs from scratch, 5 seeds (the member axis of one program), 40k updates each
+(pre-training included), evaluated every 2.5k updates (5 episodes, deterministic policy, D4RL-normalised); the two
+variants train at once (`--parallel 2`).  That budget is what fits five seeds, the fewest a reviewer accepts, in 30
+minutes on 2 idle CPU cores with the dataset generated first (23 min of training; 10 seeds take about twice as
+long: `--seeds 10`).  The final table gives every seed's updates to each threshold, the speed-up with its
+bootstrap interval and IQM scores (`offrl_jax.summary`).  TD3+BC's alpha is 2.5 here (TD3+BC's published default,
+with which the from-scratch baseline learns on this data); the paper's per-env alphas (hopper 10) come with
+`--preset authors` or `--alpha 10`.  See RESULTS.md for the measured wall-clock time and for what happens with
+longer budgets (`--updates 300000`).
 
     python -m experiments.mujoco_medium
     python -m experiments.mujoco_medium --alpha 2.5 10                                   # both alphas, one program
@@ -33,7 +37,8 @@ LABELS = {"actor+critic": "pretrained", "none": "scratch", "actor": "actor-only"
 
 def parser(prog: str = "experiments.mujoco_medium", doc: str = __doc__, updates: int = 100_000,
            eval_every: int = 5_000, env: str = "hopper", edac_pretrain: dict | None = None, omit: tuple[str, ...] = (),
-           preset: bool = False, num_critics: str = "per env") -> argparse.ArgumentParser:
+           preset: bool = False, num_critics: str = "per env", seeds: int = 3,
+           eval_episodes: int = 10) -> argparse.ArgumentParser:
     """The flags every MuJoCo study shares; studies pass their own defaults (`edac_pretrain`: the study's EDAC
     `pretrain_updates` / `actor_pretrain_fraction`, and `num_critics`, for the help text), leave out the flags
     they set themselves (`omit`: destinations, e.g. ("pretrain", "lam")), and only the main job has `--preset`."""
@@ -59,7 +64,7 @@ def parser(prog: str = "experiments.mujoco_medium", doc: str = __doc__, updates:
                     "paper's per-env alphas; docs/fidelity.md); flags given with it override single values")
     if preset:
         add("--preset", nargs="+", choices=("paper", *PRESETS), default=None,
-            help="paper: 3 envs x {td3bc, edac} medium x 3 seeds x 1M updates (evaluation every 10k), "
+            help="paper: 3 envs x {td3bc, edac} medium x --seeds seeds x 1M updates (evaluation every 10k), "
                  "each in its own sub-directory; --env/--algo/--level/--updates/--eval-every other than their "
                  "defaults are refused.  " + help_authors + ".  Both may be given")
     else:
@@ -75,7 +80,7 @@ def parser(prog: str = "experiments.mujoco_medium", doc: str = __doc__, updates:
             action.help = (f"TD3+BC's actor regularisation. Default: {MAIN_JOB_ALPHA} without a preset, else per env "
                            "(hopper 10, halfcheetah 20, walker2d 5); several values = a sweep, vmapped in one "
                            "program")
-    run_args(p, updates=updates, eval_every=eval_every)
+    run_args(p, updates=updates, eval_every=eval_every, seeds=seeds, eval_episodes=eval_episodes)
     return p
 
 
@@ -158,8 +163,8 @@ def make_study(env: str, algo: str, level: str, args, extra: dict | None = None,
                  reference=reference, **fields)
 
 
-def make_parser():
-    return parser(updates=70_000, preset=True)
+def make_parser():  # the budget that fits 5 seeds in 30 minutes on 2 cores (module doc)
+    return parser(updates=40_000, eval_every=2_500, seeds=5, eval_episodes=5, preset=True)
 
 
 def main(argv=None) -> int:

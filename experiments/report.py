@@ -1,11 +1,21 @@
-"""Markdown tables from finished runs' summary.json files (what RESULTS.md quotes).
+"""Markdown tables from finished runs (what RESULTS.md quotes), and their aggregate across studies.
 
     python -m experiments.report results/mujoco_medium/default results/figure2/*/
 
-One table per run directory: variant, final score (mean ± 95 % CI over seeds), updates and seconds to 90 % of the
-from-scratch asymptote, with the asymptote and its trend (see `offrl_jax.results.summarize`).  A directory holding
-several studies (sub-directories with a summary.json each) gives one table per study.  `--curves` adds the
-seed-mean score at every evaluation (rows: variants, columns: updates) from the run's curves.csv.
+Per run directory, the study's tables (`offrl_jax.summary`): per variant the final score, the last evaluation and
+the mean over the run as IQM over seeds with stratified-bootstrap 95 % intervals; against the from-scratch variant,
+every seed's updates to each threshold (censored seeds counted at the budget), the speed-up with its interval, the
+probability of improvement and the verdict on the paper's claim.  A run with config.json and curves.csv is
+re-summarised from them, so runs made before these statistics existed get them too.  A directory holding several
+studies (sub-directories with a summary.json each) gives one table per study.  `--curves` adds the seed-mean score
+at every evaluation (rows: variants, columns: updates) from the run's curves.csv.
+
+Given several studies, a last table aggregates them, each a task (`offrl_jax.aggregate`): IQM and mean of the final
+scores of every run with stratified-bootstrap intervals, and the probability of improvement of each variant over
+its reference averaged over tasks; `--aggregate FIG.png` draws it (interval bars, performance profiles, IQM
+sample-efficiency curves) as FIG.png and FIG.pdf:
+
+    python -m experiments.report results/figure2/*-td3bc results/mujoco_medium/default --aggregate td3bc.png
 
 `--merge OUT` first merges the given run directories (one study, each run training some of its variants, e.g. one
 process per variant on a GPU) into OUT, re-summarised across them (`offrl_jax.results.merge_runs`), and reports OUT:
@@ -27,10 +37,12 @@ from collections import defaultdict
 from pathlib import Path
 
 from experiments.common import OneLineParser
+from offrl_jax.aggregate import aggregate, aggregate_table, plot_aggregate
 from offrl_jax.cli import check_writable_dir, check_writable_file, print_error
-from offrl_jax.figures import plot_studies
-from offrl_jax.results import check_curve_seeds, merge_runs, read_curves, short_curves, summary_table as table
+from offrl_jax.figures import behaviour_score, plot_studies
+from offrl_jax.results import check_curve_seeds, read_curves, short_curves
 from offrl_jax.study import Study
+from offrl_jax.summary import merge_runs, resummarize, summary_table as table
 
 
 def summaries(path: Path) -> list[Path]:
@@ -89,6 +101,22 @@ def check_run(path: Path, summary: list[dict]) -> None:
                              f"{budgets[variant]} updates of {path} (a truncated file?)")
 
 
+def current(path: Path, summary: list[dict], reference: bool = True) -> list[dict]:
+    """The summary with today's statistics: recomputed from the run's config.json and curves.csv where both are
+    there (the behaviour score as the run recorded it, else from the cached dataset), else summary.json as it is,
+    if it has them (a summary.json copied out of its run)."""
+    run = path.parent
+    if (run / "config.json").is_file() and (run / "curves.csv").is_file():
+        known = next((s["behaviour_score"] for s in summary if s.get("behaviour_score") is not None), None)
+        if known is None and reference:
+            known = behaviour_score(summary[0].get("dataset", ""))
+        return resummarize(run, known)
+    if not all("final_iqm" in s for s in summary):
+        raise ValueError(f"{path}: written before the interval statistics, and without its run's config.json and "
+                         "curves.csv to recompute them")
+    return summary
+
+
 def curve_table(curves: Path) -> str:
     """Seed-mean score per variant (rows) at every evaluation (columns) of a curves.csv."""
     scores: dict[str, dict[int, list[float]]] = defaultdict(lambda: defaultdict(list))
@@ -113,17 +141,21 @@ def main(argv=None) -> int:
                    help="merge the run directories (one study, different variants) into OUT (a new directory)")
     p.add_argument("--plot", type=Path, metavar="FIG.png", help="also draw every study as a panel of one figure")
     p.add_argument("--overlay", action="store_true", help="with --plot: every study in one panel")
+    p.add_argument("--aggregate", type=Path, metavar="FIG.png",
+                   help="also draw the aggregate of the studies given (IQM bars, performance profiles, IQM curves)")
     p.add_argument("--no-reference", action="store_true",
-                   help="with --plot: no behaviour-score line (drawing it loads each cached dataset once)")
+                   help="no behaviour-data score: no such threshold for a run that did not record it, no line in "
+                        "--plot (finding it loads each cached dataset once)")
     args = p.parse_args(argv)
     try:
         if args.overlay and args.plot is None:
             raise ValueError("--overlay draws into the figure of --plot FIG.png; give --plot too")
-        if args.plot is not None:
-            if args.plot.suffix.lower() != ".png":
-                raise ValueError(f"--plot {args.plot}: the name must end in .png")
-            check_writable_file(args.plot)
-            check_writable_file(args.plot.with_suffix(".pdf"))
+        for flag, fig in (("--plot", args.plot), ("--aggregate", args.aggregate)):
+            if fig is not None:
+                if fig.suffix.lower() != ".png":
+                    raise ValueError(f"{flag} {fig}: the name must end in .png")
+                check_writable_file(fig)
+                check_writable_file(fig.with_suffix(".pdf"))
         if args.merge:
             if args.merge.is_dir() and any(args.merge.iterdir()):
                 what = "already holds a run" if (args.merge / "config.json").exists() else "is not empty"
@@ -131,12 +163,13 @@ def main(argv=None) -> int:
             check_writable_dir(args.merge)
             merge_runs(args.dirs, args.merge)
             args.dirs = [args.merge]
-        study_dirs = []  # every study whose summary made a table: what --plot draws
+        study_dirs, found = [], []  # every study whose summary made a table: what --plot and the aggregate take
         for d in args.dirs:
             for path in summaries(d):
                 try:
                     summary = read_summary(path)
                     check_run(path, summary)
+                    summary = current(path, summary, reference=not args.no_reference)
                     text = table(summary)
                 except (KeyError, TypeError, IndexError) as e:
                     raise ValueError(f"{path}: not a run's summary (missing or empty {e})") from None
@@ -146,6 +179,14 @@ def main(argv=None) -> int:
                         raise FileNotFoundError(f"{path.parent}: no curves.csv, which --curves reads")
                     print(curve_table(path.parent / "curves.csv") + "\n")
                 study_dirs.append(path.parent)
+                found.append(summary)
+        if len(found) > 1:
+            print(aggregate_table(aggregate(found)) + "\n")
+        if args.aggregate is not None:
+            if len(found) < 2:
+                raise ValueError("--aggregate takes two or more studies")
+            written = plot_aggregate(found, [read_curves(d / "curves.csv") for d in study_dirs], args.aggregate)
+            print(f"aggregate figure: {', '.join(map(str, written))}", file=sys.stderr)
         if args.plot is not None:
             written = plot_studies(study_dirs, args.plot, reference=not args.no_reference, overlay=args.overlay)
             print(f"figure: {', '.join(map(str, written))}", file=sys.stderr)

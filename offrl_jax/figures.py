@@ -1,7 +1,7 @@
 """Figures across runs: one panel per study, laid out as the paper's (rows: environments, columns: algorithms).
 
-Each panel draws every variant's seed-mean score against updates with its 95 % t-interval clipped to the range the
-seeds span (with 2 seeds the bare t-interval is ±12.7 standard errors, far outside anything observed), a dotted line
+Each panel draws every variant's IQM score over seeds against updates with its 95 % bootstrap interval
+(`offrl_jax.results.iqm_band`), a dotted line
 where pre-training ended, and a dashed line at the behaviour data's score (the mean D4RL-normalised return of the
 dataset's episodes) when that dataset is in the cache.  `overlay=True` draws every study in one panel instead.
 Updates are ticked as 20k / 1M; the figure is written as PNG and PDF.
@@ -13,10 +13,8 @@ import io
 import json
 from pathlib import Path
 
-import numpy as np
-
 from offrl_jax.checkpoint import atomic_write_bytes
-from offrl_jax.results import all_nan_expected, ci95, read_curves, score_matrix
+from offrl_jax.results import all_nan_expected, iqm_band, read_curves, score_matrix
 
 ALGO_NAMES = {"td3bc": "TD3+BC", "edac": "EDAC", "td3bc_cql": "TD3+BC+CQL", "edac_bc": "EDAC+BC", "bc": "BC",
               "cql": "CQL", "sacn": "SAC-N"}
@@ -26,7 +24,7 @@ ALGO_NAMES = {"td3bc": "TD3+BC", "edac": "EDAC", "td3bc_cql": "TD3+BC+CQL", "eda
 def behaviour_score(dataset: str) -> float | None:
     """The dataset's behaviour score, if the dataset is cached (None otherwise: nothing is generated here)."""
     from offrl_jax import datasets
-    from offrl_jax.envs import normalized_score
+    from offrl_jax.summary import behaviour_score as of_data
 
     try:
         if not datasets.is_cached(dataset):
@@ -34,7 +32,7 @@ def behaviour_score(dataset: str) -> float | None:
         ds = datasets.load(dataset)
     except Exception:  # noqa: BLE001 -- a reference line is optional; a dataset we cannot read simply has none
         return None
-    return float(np.mean(normalized_score(ds.env, ds.episode_returns())))
+    return of_data(ds)
 
 
 def panel_grid(summaries: list[list[dict]]) -> tuple[list[str], list[str]]:
@@ -77,10 +75,7 @@ def plot_studies(study_dirs: list[Path], path: Path, reference: bool = True, ove
                 continue
             color = f"C{len(ax.get_lines()) if overlay else i}"
             with all_nan_expected():
-                mean = np.nanmean(scores, axis=0)
-                half = np.array([ci95(scores[:, j]) for j in range(len(updates))])
-                low = np.maximum(mean - half, np.nanmin(scores, axis=0))
-                high = np.minimum(mean + half, np.nanmax(scores, axis=0))
+                mean, low, high = iqm_band(scores)
             label = f"{study_dir.name}: {entry['variant']}" if overlay else entry["variant"]
             ax.plot(updates, mean, color=color, label=label)
             ax.fill_between(updates, low, high, color=color, alpha=0.2)
@@ -103,7 +98,7 @@ def plot_studies(study_dirs: list[Path], path: Path, reference: bool = True, ove
         for c in range(len(cols)):
             if (r, c) not in used:
                 axes[r][c].axis("off")
-    fig.suptitle("seed mean; band: 95 % t-interval, clipped to the range of the seeds", fontsize=9)
+    fig.suptitle("IQM over seeds; band: stratified-bootstrap 95 % interval", fontsize=9)
     fig.tight_layout()
     written = []
     for target, kind in ((path, "png"), (path.with_suffix(".pdf"), "pdf")):

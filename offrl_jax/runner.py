@@ -39,9 +39,10 @@ from offrl_jax.driver import Driver, device_data
 from offrl_jax.evaluate import evaluate_normalized, make_policy
 from offrl_jax.loggers import make_logger
 from offrl_jax.provenance import fingerprint
-from offrl_jax.results import plot_curves, pretrain_ends_of, summarize, summary_json, write_curves
+from offrl_jax.results import plot_curves, pretrain_ends_of, write_curves
 from offrl_jax.resume import check_resume, checkpoint_path, group_identity, kept_updates
 from offrl_jax.study import Study, Variant
+from offrl_jax.summary import behaviour_score, summarize, summary_json
 from offrl_jax.workers import run_in_processes
 
 
@@ -122,7 +123,7 @@ def run_study(study: Study, out_dir: Path, dataset: Dataset, resume: bool = Fals
             except Exception as e:  # noqa: BLE001 -- never in the way of the run's own outcome
                 print(f"warning: closing the logger failed ({type(e).__name__}: {e})", file=sys.stderr)
     history = recorder.all_rows()
-    summary = summarize(study, history, pretrain_ends)
+    summary = summarize(study, history, pretrain_ends, behaviour_score(dataset))
     if writer:
         atomic_write_text(out_dir / "summary.json", summary_json(summary))
         plot_curves(out_dir / "curves.png", study, history, pretrain_ends)

@@ -19,7 +19,8 @@ def labels(study):
 def test_main_job_default():
     (study,) = build(mujoco_medium, [])
     assert study.dataset == "hopper-medium" and labels(study) == ["pretrained", "scratch"]
-    assert study.reference == "scratch" and study.seeds == (0, 1, 2) and study.updates == 70_000
+    assert study.reference == "scratch" and study.seeds == (0, 1, 2, 3, 4) and study.updates == 40_000
+    assert study.eval_every == 2_500 and study.eval_episodes == 5
     assert dict(study.variants[0].overrides)["pretrain"] == "actor+critic"
 
 

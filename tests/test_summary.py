@@ -1,7 +1,8 @@
-"""summary.json's numbers from hand-made curves: final score, asymptote, its trend, updates/seconds to 90 %."""
+"""summary.json's numbers from hand-made curves: per-seed final, last and mean scores, the asymptote and its trend,
+every seed's updates and seconds to each threshold, the speed-up and the verdict."""
 import pytest
 
-from offrl_jax.results import summarize
+from offrl_jax.summary import summarize
 from offrl_jax.study import Study, Variant
 
 
@@ -17,15 +18,30 @@ def test_summary_numbers_by_hand():
     scratch = [[10, 20, 30, 40, 50, 60, 70, 80, 90, 100], [10, 20, 30, 40, 50, 60, 70, 80, 90, 100]]
     pretrained = [[50, 95, 90, 90, 90, 90, 90, 90, 90, 80], [50, 85, 90, 90, 90, 90, 90, 90, 90, 100]]
     rows = rows_of("pretrained", pretrained) + rows_of("scratch", scratch)
-    summary = {s["variant"]: s for s in summarize(study, rows, {"pretrained": 1000})}
-    # final = mean of the last 10 % of evaluations (1 of 10) per seed, then over seeds
-    assert summary["scratch"]["final_score_mean"] == 100 and summary["pretrained"]["final_score_mean"] == 90
-    assert summary["pretrained"]["asymptote"] == 100
-    # first evaluation whose seed-mean >= 90: pretrained at 2000 updates (mean 90), scratch at 9000
-    assert summary["pretrained"]["updates_to_90pct"] == 2000 and summary["pretrained"]["seconds_to_90pct"] == 20.0
-    assert summary["scratch"]["updates_to_90pct"] == 9000
-    # the reference still climbs: last 20 % (95) minus the 20 % before (75)
-    assert summary["scratch"]["asymptote_trend"] == pytest.approx(20.0)
+    summary = {s["variant"]: s for s in summarize(study, rows, {"pretrained": 1000}, behaviour=50.0)}
+    pre, scr = summary["pretrained"], summary["scratch"]
+    # final = mean of the last 10 % of evaluations (1 of 10) per seed; last = the last evaluation; auc = the mean
+    assert scr["final_scores"] == [100, 100] and pre["final_scores"] == [80, 100] and pre["last_scores"] == [80, 100]
+    assert pre["auc_scores"] == [85.5, 86.5] and scr["auc_scores"] == [55, 55]
+    assert scr["final_score_mean"] == 100 and pre["final_score_mean"] == 90 and pre["asymptote"] == 100
+    assert pre["final_iqm"]["value"] == 90 and (pre["final_iqm"]["low"], pre["final_iqm"]["high"]) == (80, 100)
+    # the reference still climbs: last 20 % (95) minus the 20 % before (75): no asymptote, so no threshold of it
+    assert scr["asymptote_trend"]["value"] == pytest.approx(20.0) and not scr["asymptote_flat"]
+    assert [r["threshold"] for r in pre["reach"]] == ["behaviour data", "80% of best", "90% of best", "95% of best"]
+    # best seed-mean evaluation of any variant: scratch's 100 at 10k (pretrained's best mean is 90)
+    assert pre["best_score"] == 100
+    by = {r["threshold"]: r for r in pre["reach"]}
+    assert by["behaviour data"]["updates"] == [1000, 1000] and by["behaviour data"]["seconds"] == [10.0, 10.0]
+    assert by["90% of best"]["updates"] == [2000, 3000]  # seed 1 is at 85 < 90 at 2000, at 90 from 3000
+    assert {r["threshold"]: r for r in scr["reach"]}["95% of best"]["updates"] == [10_000, 10_000]
+    vs = pre["vs_reference"]
+    assert vs["reference"] == "scratch" and vs["headline"] == "90% of best" and "vs_reference" not in scr
+    sp = {x["threshold"]: x for x in vs["speedup"]}
+    # scratch reaches 50 at 5000 on both seeds, pretrained at 1000: 5x, every resample the same
+    assert sp["behaviour data"]["updates"] == {"value": 5.0, "low": 5.0, "high": 5.0}
+    assert vs["verdict"] == "holds"
+    # finals 80, 100 against 100, 100: two pairs lost (0), two tied (1/2): 1/4
+    assert vs["poi_final"]["value"] == pytest.approx(0.25)
     assert summary["pretrained"]["pretrain_updates"] == 1000 and summary["scratch"]["pretrain"] == "none"
     # peak of the seed-mean curve (95 and 85 -> 90 at 2000) ... pretrained: (95 + 85) / 2 = 90 at 2000, later 90s tie
     # and the first is kept; the final (90) is 0 below it.  scratch peaks at its end.
@@ -54,7 +70,7 @@ def test_report_renders_summary_and_rejects_missing_dir(tmp_path, capsys):
                                                                          {})))
     assert report.main([str(tmp_path / "run")]) == 0
     out = capsys.readouterr().out
-    assert "| scratch | 30.0 ± " in out and "asymptote (from-scratch final) 30.0" in out
+    assert "| scratch | 30.0 [20.0, 40.0] | 30.0 [20.0, 40.0] | 25.0 [15.0, 35.0] | 20 40 | 0 |" in out
     assert report.main([str(tmp_path / "missing")]) == 2
     assert capsys.readouterr().err.startswith("error: ")
 
@@ -70,24 +86,16 @@ def test_report_curve_table_is_the_seed_mean_per_evaluation(tmp_path):
     assert lines[2] == "| a | 15.0 | 40.0 |" and lines[3] == "| b |  | 7.0 |"
 
 
-def test_diverged_seed_is_named_and_ci_uses_the_t_quantile():
-    import math
-
-    import numpy as np
-
-    from offrl_jax.results import ci95, t975
-
+def test_a_diverged_seed_is_named_and_left_out_of_the_aggregates():
     study = Study(name="t", dataset="hopper-medium", env="hopper", seeds=(0, 1, 2), updates=2000, eval_every=1000,
                   variants=(Variant.of("scratch", "td3bc", pretrain="none"),), reference="scratch")
     nan = float("nan")
     (s,) = summarize(study, rows_of("scratch", [[10, 20], [30, nan], [50, 60]]), {})
     assert s["seeds_diverged"] == [1] and s["final_score_mean"] == 40.0  # (20 + 60) / 2: seed 1 is left out
-    # t quantiles: the table to df 10, then within 0.1 % of the exact values (df 11: 2.201, 30: 2.042, 100: 1.984)
-    assert t975(3) == 3.182
-    for df, exact in ((11, 2.2010), (30, 2.0423), (100, 1.9840)):
-        assert abs(t975(df) - exact) / exact < 1e-3
-    values = np.arange(12.0)
-    assert ci95(values) == pytest.approx(t975(11) * values.std(ddof=1) / math.sqrt(12))
+    assert s["final_mean"] == {"value": 40.0, "low": 20.0, "high": 60.0}  # the bootstrap of the two others
+    # a seed that diverged before a threshold never reached it: censored, not dropped
+    by = {r["threshold"]: r for r in s["reach"]}
+    assert by["90% of best"]["censored"] == [True, True, False]  # 0.9 * 60 = 54: only seed 2 (at 2000)
 
 
 def test_unknown_reference_label_is_refused():
@@ -107,35 +115,42 @@ def test_sweep_variants_are_measured_against_the_scratch_run_with_the_same_value
     rows = [r for label, final in finals.items() for r in rows_of(label, [[final / 2, final]])]
     summary = {s["variant"]: s for s in summarize(study, rows, {})}
     assert summary["pretrained alpha=1"]["asymptote"] == 40 and summary["pretrained alpha=2"]["asymptote"] == 80
-    # curves [25, 50] against 0.9 * 40 = 36: reached at 2000; [30, 60] against 0.9 * 80 = 72: never
-    assert summary["pretrained alpha=1"]["updates_to_90pct"] == 2000
-    assert summary["pretrained alpha=2"]["updates_to_90pct"] is None
+    assert summary["pretrained alpha=1"]["vs_reference"]["reference"] == "scratch alpha=1"
+    assert summary["pretrained alpha=2"]["vs_reference"]["reference"] == "scratch alpha=2"
+    # one seed: no interval, so no verdict
+    assert summary["pretrained alpha=1"]["vs_reference"]["verdict"] == "undecided: one seed, no interval"
 
 
 def test_ninety_percent_of_a_negative_asymptote_lies_below_it():
     """Adroit scores can be negative: 90 % of -10 must be reached at -11, not demanded at -9 (above the asymptote)."""
-    study = Study(name="t", dataset="door-human", env="door", seeds=(0,), updates=2000, eval_every=1000,
+    study = Study(name="t", dataset="door-human", env="door", seeds=(0,), updates=3000, eval_every=1000,
                   variants=(Variant.of("pre", "td3bc", pretrain_updates=1000),
                             Variant.of("scratch", "td3bc", pretrain="none")),
                   reference="scratch")
-    rows = rows_of("pre", [[-11.0, -10.5]]) + rows_of("scratch", [[-20.0, -10.0]])
+    from offrl_jax.summary import fraction_of
+
+    assert fraction_of(-10.0, 0.9) == -11.0 and fraction_of(10.0, 0.9) == 9.0
+    rows = rows_of("pre", [[-11.0, -10.5, -10.5]]) + rows_of("scratch", [[-20.0, -10.0, -10.0]])
     summary = {s["variant"]: s for s in summarize(study, rows, {})}
-    assert summary["scratch"]["asymptote"] == -10.0 and summary["pre"]["updates_to_90pct"] == 1000
+    assert summary["scratch"]["asymptote"] == -10.0 and summary["scratch"]["asymptote_flat"]
+    by = {r["threshold"]: r for r in summary["pre"]["reach"]}
+    assert by["90% of asymptote"]["score"] == -11.0 and by["90% of asymptote"]["updates"] == [1000]
 
 
-def test_report_gives_each_swept_variant_its_own_asymptote():
-    from experiments.report import table
+def test_the_table_shows_every_seed_and_marks_censored_seeds_and_lower_bounds():
+    from offrl_jax.summary import summary_table
 
-    base = {"dataset": "hopper-medium", "seeds": [0], "updates": 2000, "final_score_ci95": 0.0,
-            "updates_to_90pct": None, "seconds_to_90pct": None, "pretrain_updates": 0, "asymptote_trend": None}
-    summary = [dict(base, variant="pre alpha=1", final_score_mean=50.0, asymptote=40.0),
-               dict(base, variant="scratch alpha=1", final_score_mean=40.0, asymptote=40.0),
-               dict(base, variant="scratch alpha=5", final_score_mean=20.0, asymptote=20.0)]
-    lines = table(summary).splitlines()
-    assert "per variant" in lines[0] and lines[2].endswith("asymptote (trend) |")
-    assert lines[-1] == "| scratch alpha=5 | 20.0 ± 0.0 | never | never | 0 | n/a | 20.0 |"  # no peak: older file
-    # one shared asymptote stays in the header, with no extra column
-    assert "asymptote (from-scratch final) 40.0" in table(summary[:2]).splitlines()[0]
+    study = Study(name="t", dataset="hopper-medium", env="hopper", seeds=(0, 1), updates=3000, eval_every=1000,
+                  variants=(Variant.of("pretrained", "td3bc", pretrain_updates=1000),
+                            Variant.of("scratch", "td3bc", pretrain="none")), reference="scratch")
+    rows = rows_of("pretrained", [[90, 95, 95], [60, 95, 96]]) + rows_of("scratch", [[10, 20, 30], [10, 96, 90]])
+    text = summary_table(summarize(study, rows, {"pretrained": 1000}))
+    # 90 % of the best seed-mean evaluation (95.5) is 85.95: pretrained at 1k and 2k, scratch never (censored at
+    # the 3k budget) and at 2k: 2.5k / 1.5k, a lower bound; the arms' resample means span 1-2k and 2-3k, each end
+    # with probability 1/4, so the 95 % interval is [2k/2k, 3k/1k]
+    assert "| 90% of best (headline) | 86.0 | 1k 2k | >3k 2k (1 censored) | ≥ 1.67x [1.00, 3.00] |" in text
+    assert text.endswith("at 90% of best: undecided: the interval holds 1.")
+    assert "| scratch | 60.0 [30.0, 90.0] |" in text and "final per seed" in text
 
 
 def test_a_seed_that_diverges_inside_the_final_window_has_no_final_score():
@@ -147,13 +162,13 @@ def test_a_seed_that_diverges_inside_the_final_window_has_no_final_score():
     rows = rows_of("bc", [[1.0, 2.0, 3.0, 4.0], [1.0, 50.0, 60.0, nan]])  # seed 1 diverged after 3000 updates
     (s,) = summarize(study, rows, {})
     assert s["final_score_mean"] == 3.0 and s["seeds_diverged"] == [1]  # not (3 + 55) / 2
-    assert math.isnan(s["asymptote"]) and s["updates_to_90pct"] is None  # no reference given: no asymptote
+    assert math.isnan(s["asymptote"]) and "vs_reference" not in s  # no reference given: no asymptote, no speed-up
 
 
 def test_summary_json_writes_null_for_nan():
     import json
 
-    from offrl_jax.results import summary_json
+    from offrl_jax.summary import summary_json
 
     text = summary_json([{"asymptote": float("nan"), "final_score_mean": 3.0, "overrides": {"x": float("inf")}}])
     assert json.loads(text) == [{"asymptote": None, "final_score_mean": 3.0, "overrides": {"x": None}}]
@@ -185,12 +200,16 @@ def test_merge_runs_resummarises_variants_trained_apart(tmp_path, capsys):
     a = _run_dir(tmp_path / "a", pre, pre_rows)
     b = _run_dir(tmp_path / "b", scratch, scratch_rows)
     assert report.main(["--merge", str(tmp_path / "ab"), str(a), str(b)]) == 0
-    assert "| pretrained | 90.0 ± " in capsys.readouterr().out
+    assert "| pretrained | 90.0 [85.0, 95.0] |" in capsys.readouterr().out
     summary = {s["variant"]: s for s in json.loads((tmp_path / "ab" / "summary.json").read_text())}
-    # the scratch run's final (mean of 100 and 80) is now the pretrained variant's asymptote too; 90 % of 90 = 81,
-    # reached by the pretrained seed-mean (85) at 3000 updates and by scratch (90) at 4000
-    assert summary["pretrained"]["asymptote"] == 90 and summary["pretrained"]["updates_to_90pct"] == 3000
-    assert summary["scratch"]["updates_to_90pct"] == 4000
+    # the scratch run's final (mean of 100 and 80) is now the pretrained variant's asymptote too, and scratch its
+    # reference; 90 % of the best (seed-mean 90, both at 4000) is 81: pretrained at 3000 and 4000 updates, scratch
+    # at 4000 and never (80)
+    assert summary["pretrained"]["asymptote"] == 90 and summary["pretrained"]["vs_reference"]["reference"] == "scratch"
+    reach = {r["threshold"]: r for r in summary["pretrained"]["reach"]}["90% of best"]
+    assert reach["updates"] == [3000, 4000] and reach["censored"] == [False, False]
+    reach = {r["threshold"]: r for r in summary["scratch"]["reach"]}["90% of best"]
+    assert reach["updates"] == [4000, 4000] and reach["censored"] == [False, True]
     # pre-training ends at the last evaluation before offline RL
     assert summary["pretrained"]["pretrain_updates"] == 2000 and summary["scratch"]["pretrain_updates"] == 0
     merged = Study.from_json((tmp_path / "ab" / "config.json").read_text())

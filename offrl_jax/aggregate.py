@@ -1,0 +1,127 @@
+"""Across studies (tasks): aggregate scores with stratified-bootstrap intervals, the probability of improvement,
+performance profiles and sample-efficiency curves (Agarwal et al. 2021), from the studies' summaries and curves.
+
+Each study is one task and every variant label one arm; an arm is aggregated over the studies that all have it.
+Every (task, arm) is a stratum of the bootstrap: its seeds are resampled on their own, so tasks may have different
+numbers of seeds.  The per-seed numbers come from summary.json (`final_scores`, `auc_scores`), the curves from
+curves.csv.
+"""
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import numpy as np
+
+from offrl_jax import stats
+from offrl_jax.checkpoint import atomic_write_bytes
+from offrl_jax.results import all_nan_expected, score_matrix
+
+
+def arms(summaries: list[list[dict]]) -> list[str]:
+    """The variant labels every study has, in the first study's order."""
+    common = set.intersection(*({s["variant"] for s in summary} for summary in summaries))
+    return [s["variant"] for s in summaries[0] if s["variant"] in common]
+
+
+def comparisons(summaries: list[list[dict]]) -> list[tuple[str, str]]:
+    """(variant, reference) pairs that every study compares (its `vs_reference`)."""
+    pairs = None
+    for summary in summaries:
+        mine = {(s["variant"], s["vs_reference"]["reference"]) for s in summary if s.get("vs_reference")}
+        pairs = mine if pairs is None else pairs & mine
+    order = [(s["variant"], s["vs_reference"]["reference"]) for s in summaries[0] if s.get("vs_reference")]
+    return [p for p in order if p in (pairs or set())]
+
+
+def aggregate(summaries: list[list[dict]]) -> dict:
+    """{arm: {"final_iqm", "final_mean", "auc_iqm"}: Estimate json} and {"variant vs reference": poi json}."""
+    per = [{s["variant"]: s for s in summary} for summary in summaries]
+    out: dict = {"tasks": len(summaries), "arms": {}, "poi": {}}
+    for arm in arms(summaries):
+        finals = [np.array(p[arm]["final_scores"], dtype=float) for p in per]
+        aucs = [np.array(p[arm]["auc_scores"], dtype=float) for p in per]
+        out["arms"][arm] = {"seeds": [len(f) for f in finals],
+                            "final_iqm": stats.interval(finals, stats.pooled(stats.iqm)).to_json(),
+                            "final_mean": stats.interval(finals, stats.pooled(stats.mean)).to_json(),
+                            "auc_iqm": stats.interval(aucs, stats.pooled(stats.iqm)).to_json()}
+    for variant, reference in comparisons(summaries):
+        pairs = [(np.array(p[variant]["final_scores"], float), np.array(p[reference]["final_scores"], float))
+                 for p in per]
+        out["poi"][f"{variant} vs {reference}"] = stats.aggregate_poi(pairs).to_json()
+    return out
+
+
+def aggregate_table(result: dict) -> str:
+    est = lambda d, fmt=".1f": stats.Estimate.from_json(d).text(fmt)  # noqa: E731
+    lines = [f"Across {result['tasks']} studies (each a task; IQM and mean of every run of every task, "
+             "stratified-bootstrap 95 % CI)", "", "| variant | runs | final score IQM | final score mean | "
+             "mean over the run IQM |", "|---|--:|--:|--:|--:|"]
+    for arm, a in result["arms"].items():
+        lines.append(f"| {arm} | {sum(a['seeds'])} | {est(a['final_iqm'])} | {est(a['final_mean'])} | "
+                     f"{est(a['auc_iqm'])} |")
+    if result["poi"]:
+        lines += ["", "| probability of improvement (final score, averaged over tasks) | P [95 % CI] |", "|---|--:|"]
+        lines += [f"| {pair} | {est(p, '.2f')} |" for pair, p in result["poi"].items()]
+    return "\n".join(lines)
+
+
+def common_updates(curves: list[list[dict]], arm: str) -> np.ndarray:
+    """The evaluation updates that every study's `arm` has."""
+    grids = [set(score_matrix(rows, arm)[0].tolist()) for rows in curves]
+    return np.array(sorted(set.intersection(*grids))) if grids else np.array([])
+
+
+@all_nan_expected()
+def plot_aggregate(summaries: list[list[dict]], curves: list[list[dict]], path: Path,
+                   resamples: int = 2000) -> list[Path]:
+    """Three panels, written as `path` (PNG) and its PDF: final-score IQM per arm with its interval, performance
+    profiles (fraction of runs above each score) of the final score, and IQM sample-efficiency curves over the
+    evaluations all studies share."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    result = aggregate(summaries)
+    names = list(result["arms"])
+    fig, (bars, profile, efficiency) = plt.subplots(1, 3, figsize=(14, 4))
+    for i, arm in enumerate(names):
+        e = stats.Estimate.from_json(result["arms"][arm]["final_iqm"])
+        err = None if e.low is None else [[e.value - e.low], [e.high - e.value]]
+        bars.barh(i, e.value, xerr=err, color=f"C{i}", capsize=4)
+        finals = np.concatenate([[x for x in next(s for s in summary if s["variant"] == arm)["final_scores"]
+                                  if x is not None] for summary in summaries]).astype(float)
+        taus = np.linspace(min(0.0, np.nanmin(finals)), max(100.0, np.nanmax(finals)), 101)
+        profile.plot(taus, stats.performance_profile(finals[np.isfinite(finals)], taus), color=f"C{i}", label=arm)
+        updates = common_updates(curves, arm)
+        if len(updates):
+            per_task = []
+            for rows in curves:
+                u, _, scores = score_matrix(rows, arm)
+                per_task.append(scores[:, np.isin(u, updates)])
+            found = [stats.interval([t[:, j] for t in per_task], stats.pooled(stats.iqm), resamples=resamples)
+                     for j in range(len(updates))]
+            middle = np.array([f.value for f in found])
+            efficiency.plot(updates, middle, color=f"C{i}", label=arm)
+            efficiency.fill_between(updates, [f.value if f.low is None else f.low for f in found],
+                                    [f.value if f.high is None else f.high for f in found], color=f"C{i}", alpha=0.2)
+    bars.set_yticks(range(len(names)), names)
+    bars.set_xlabel("final score, IQM over all runs (95 % CI)")
+    profile.set_xlabel("score τ")
+    profile.set_ylabel("fraction of runs with final score > τ")
+    efficiency.set_xlabel("updates (pre-training included)")
+    efficiency.set_ylabel("IQM score")
+    for ax in (profile, efficiency):
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.suptitle(f"{result['tasks']} studies; intervals: stratified bootstrap over each study's seeds", fontsize=9)
+    fig.tight_layout()
+    written = []
+    for target, kind in ((path, "png"), (path.with_suffix(".pdf"), "pdf")):
+        buffer = io.BytesIO()
+        fig.savefig(buffer, format=kind, dpi=110)
+        atomic_write_bytes(target, buffer.getvalue())
+        written.append(target)
+    plt.close(fig)
+    return written

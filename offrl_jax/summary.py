@@ -1,0 +1,332 @@
+"""A study's summary (`summary.json`, one object per variant) and its printed tables, from curves.csv's rows.
+
+Every measure is per seed first (`offrl_jax.stats`), then aggregated with a stratified-bootstrap 95 % interval:
+- the final score (per seed the mean of the last 10 % of evaluations, or of those inside `final_window`), the last
+  evaluation's score (never the best), and the mean score over the run (the area under the curve), each as IQM;
+- per threshold, each seed's updates and seconds (pre-training included) to first reach it, a seed that never
+  does censored at the budget; the thresholds: the behaviour data's score, 80/90/95 % of the best seed-mean
+  evaluation of any variant, and 80/90/95 % of the from-scratch final where that is an asymptote (the interval of
+  its change over the last 20 % of evaluations within +-5 % of its level, `stats.trend_is_flat`);
+- against the from-scratch reference: the speed-up (reference's mean updates / this variant's) with its interval,
+  the probability of improvement of the final score, and whether the paper's claim (fewer updates) holds at the
+  headline threshold: 90 % of the asymptote where there is one, else 90 % of the best score.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from offrl_jax import stats
+from offrl_jax.algos import make_config
+from offrl_jax.checkpoint import atomic_write_text
+from offrl_jax.results import (
+    all_nan_expected,
+    check_curve_seeds,
+    plot_curves,
+    pretrain_ends_of,
+    read_curves,
+    score_matrix,
+    short_curves,
+    write_curves,
+)
+from offrl_jax.study import Study, reference_label
+
+FRACTIONS = (0.8, 0.9, 0.95)
+
+
+def fraction_of(score: float, f: float) -> float:
+    """f of a score, below it for a negative score too (90 % of -10 is -11): score - (1 - f) |score|."""
+    return score - (1 - f) * abs(score)
+
+
+def final_scores(study: Study, updates: np.ndarray, scores: np.ndarray) -> np.ndarray:
+    """Per seed, the mean of its evaluations in `final_window`, or of the last 10 % of them; NaN for a seed that
+    diverged before or inside the window (not the mean of its evaluations before it diverged)."""
+    if study.final_window:
+        keep = (updates >= study.final_window[0]) & (updates <= study.final_window[1])
+    else:
+        keep = np.arange(len(updates)) >= len(updates) - max(1, int(round(0.1 * len(updates))))
+    return scores[:, keep].mean(axis=1) if keep.any() else np.full(len(scores), np.nan)
+
+
+def behaviour_score(dataset) -> float | None:
+    """The dataset's behaviour score: its episodes' mean D4RL-normalised return (None where it has no episode or
+    no normalisation)."""
+    from offrl_jax.envs import normalized_score
+
+    try:
+        returns = dataset.episode_returns()
+        score = float(np.mean(normalized_score(dataset.env, returns))) if len(returns) else float("nan")
+    except (KeyError, ValueError, TypeError, AttributeError):
+        return None
+    return score if np.isfinite(score) else None
+
+
+def summarize(study: Study, rows: list[dict], pretrain_ends: dict[str, int],
+              behaviour: float | None = None) -> list[dict]:
+    """One dict per variant (see the module doc); `behaviour` is the dataset's behaviour score, if known."""
+    with all_nan_expected():
+        return _summarize(study, rows, pretrain_ends, behaviour)
+
+
+def _summarize(study: Study, rows: list[dict], pretrain_ends: dict[str, int], behaviour: float | None) -> list[dict]:
+    curves = {v.label: score_matrix(rows, v.label) for v in study.variants}
+    finals = {label: final_scores(study, u, s) if len(u) else np.full(len(study.seeds), np.nan)
+              for label, (u, _, s) in curves.items()}
+    means = [np.nanmean(s, axis=0) for u, _, s in curves.values() if len(u)]
+    best = max((float(np.nanmax(m)) for m in means if np.isfinite(m).any()), default=None)
+    summary = []
+    for v in study.variants:
+        updates, seconds, scores = curves[v.label]
+        reference = reference_label(study, v.label)
+        ref_curve = curves[reference][2] if reference and len(curves[reference][0]) else None
+        asymptote = float(np.nanmean(finals[reference])) if ref_curve is not None else float("nan")
+        trend, flat = stats.trend_is_flat(ref_curve) if ref_curve is not None else (None, False)
+        thresholds = ([("behaviour data", behaviour)] if behaviour is not None else []) + [
+            (f"{f:.0%} of best", fraction_of(best, f)) for f in FRACTIONS if best is not None] + [
+            (f"{f:.0%} of asymptote", fraction_of(asymptote, f)) for f in FRACTIONS if flat]
+        config = make_config(v.algo, study.env, study.dataset, **dict(v.overrides))
+        mean_curve = np.nanmean(scores, axis=0) if len(updates) else np.array([np.nan])
+        peak = int(np.nanargmax(mean_curve)) if np.isfinite(mean_curve).any() else None
+        last = scores[:, -1] if len(updates) else np.full(len(study.seeds), np.nan)
+        auc = np.nanmean(scores, axis=1) if len(updates) else np.full(len(study.seeds), np.nan)
+        reach = []
+        for name, value in thresholds if len(updates) else ():
+            at, censored = stats.first_reach(updates, scores, value)
+            reach.append({"threshold": name, "score": value, "updates": at.tolist(),
+                          "seconds": [float(seconds[np.searchsorted(updates, u)]) for u in at],
+                          "censored": censored.tolist()})
+        summary.append({
+            "variant": v.label, "env": study.env, "dataset": study.dataset, "algo": v.algo,
+            "pretrain": getattr(config, "pretrain", "none"), "seeds": list(study.seeds), "updates": study.updates,
+            "pretrain_updates": pretrain_ends.get(v.label, 0), "behaviour_score": behaviour,
+            # per seed: what every aggregate below is computed from (and what a later aggregate across runs reads)
+            "final_scores": finals[v.label].tolist(), "last_scores": last.tolist(), "auc_scores": auc.tolist(),
+            "final_iqm": stats.interval([finals[v.label]], stats.iqm).to_json(),
+            "final_mean": stats.interval([finals[v.label]], stats.mean).to_json(),
+            "last_iqm": stats.interval([last], stats.iqm).to_json(),
+            "auc_iqm": stats.interval([auc], stats.iqm).to_json(),
+            "final_score_mean": float(np.nanmean(finals[v.label])),
+            "asymptote": asymptote,  # the reference's mean final score
+            # its mean change over the last 20 % of evaluations (against the 20 % before), and whether its interval
+            # lies within +-5 % of its level: only a flat one is an asymptote the thresholds may be fractions of
+            "asymptote_trend": trend.to_json() if trend is not None else None, "asymptote_flat": flat,
+            "best_score": best, "reach": reach,
+            # the seed-mean curve's best evaluation, and how far the final score is below it (the paper's
+            # stability question: does a variant stay up?)
+            "peak_score_mean": float(mean_curve[peak]) if peak is not None else float("nan"),
+            "peak_update": int(updates[peak]) if peak is not None else None,
+            "fall_from_peak": float(mean_curve[peak] - np.nanmean(finals[v.label])) if peak is not None
+            else float("nan"),
+            # seeds whose final score is not finite (diverged and stopped): the aggregates leave them out
+            "seeds_diverged": [seed for seed, f in zip(study.seeds, finals[v.label]) if not np.isfinite(f)],
+            "overrides": dict(v.overrides),
+            "config": dataclasses.asdict(config),
+        })
+    by_label = {s["variant"]: s for s in summary}
+    for s in summary:
+        reference = reference_label(study, s["variant"])
+        if reference and reference != s["variant"]:
+            s["vs_reference"] = compare(s, by_label[reference])
+    return summary
+
+
+def compare(mine: dict, ref: dict) -> dict:
+    """This variant against its from-scratch reference: per threshold the speed-up in updates and in seconds
+    (reference / this, censored seeds at the budget), the probability that its final score and its mean over
+    the run are higher, and the verdict on the paper's claim at the headline threshold."""
+    speedups = []
+    for a, b in zip(mine["reach"], ref["reach"]):
+        assert a["threshold"] == b["threshold"], (a["threshold"], b["threshold"])
+        speedups.append({"threshold": a["threshold"], "score": a["score"],
+                         "updates": stats.speedup(np.array(b["updates"]), np.array(a["updates"])).to_json(),
+                         "seconds": stats.speedup(np.array(b["seconds"]), np.array(a["seconds"])).to_json(),
+                         "censored": sum(a["censored"]), "reference_censored": sum(b["censored"])})
+    names = [s["threshold"] for s in speedups]
+    headline = "90% of asymptote" if "90% of asymptote" in names else "90% of best" if "90% of best" in names else None
+    return {"reference": ref["variant"], "speedup": speedups, "headline": headline,
+            "verdict": verdict(speedups[names.index(headline)] if headline else None, len(mine["seeds"])),
+            "poi_final": stats.probability_of_improvement(np.array(mine["final_scores"], float),
+                                                          np.array(ref["final_scores"], float)).to_json(),
+            "poi_auc": stats.probability_of_improvement(np.array(mine["auc_scores"], float),
+                                                        np.array(ref["auc_scores"], float)).to_json()}
+
+
+def verdict(speedup: dict | None, seeds: int) -> str:
+    """'holds' when the speed-up's interval lies above 1, 'does not hold' below or at 1, else 'undecided'."""
+    if speedup is None:
+        return "undecided: no threshold"
+    if seeds < 2:
+        return "undecided: one seed, no interval"
+    ratio = stats.Estimate.from_json(speedup["updates"])
+    if speedup["censored"] == speedup["reference_censored"] == seeds:
+        return "undecided: neither arm reaches the threshold"
+    if ratio.low is None or ratio.high is None:
+        return "undecided"
+    if ratio.low > 1:
+        return "holds"
+    if ratio.high <= 1:
+        return "does not hold"
+    return "undecided: the interval holds 1"
+
+
+def summary_json(summary: list[dict]) -> str:
+    """summary.json text: NaN (no asymptote, every seed diverged) becomes null, which JSON has and NaN is not."""
+    def clean(x):
+        if isinstance(x, float) and not math.isfinite(x):
+            return None
+        if isinstance(x, dict):
+            return {k: clean(v) for k, v in x.items()}
+        return [clean(v) for v in x] if isinstance(x, list) else x
+    return json.dumps(clean(summary), indent=2)
+
+
+def _est(d: dict | None, fmt: str = ".1f", suffix: str = "") -> str:
+    return stats.Estimate.from_json(d).text(fmt, suffix) if d else "n/a"
+
+
+def _k(u: int) -> str:
+    return f"{u / 1000:g}k" if u >= 1000 else str(u)
+
+
+def _per_seed(reach: dict) -> str:
+    """'10k 10k >40k 15k' (a censored seed as >budget) and the censored count."""
+    cells = [f">{_k(u)}" if c else _k(u) for u, c in zip(reach["updates"], reach["censored"])]
+    return " ".join(cells) + (f" ({sum(reach['censored'])} censored)" if any(reach["censored"]) else "")
+
+
+def _speedup(d: dict, censored_reference: bool) -> str:
+    text = _est(d, ".2f", "x")
+    return ("≥ " + text) if censored_reference and text != "n/a" else text
+
+
+def summary_table(summary: list[dict]) -> str:
+    """The printed result of a study: per variant its final, last and over-the-run scores (IQM [95 % CI] over
+    seeds), and per variant compared with its reference the updates to each threshold per seed and the speed-up."""
+    first = summary[0]
+    n = len(first["seeds"])
+    head = (f"{first['dataset']}, {n} seed{'s' if n != 1 else ''}, {first['updates']:,} updates per variant; "
+            "IQM over seeds" + (" [stratified-bootstrap 95 % CI]" if n > 1 else " (one seed: no interval)"))
+    if _known(first.get("behaviour_score")):
+        head += f"; behaviour data {first['behaviour_score']:.1f}"
+    lines = [head, "", "| variant | final score | last evaluation | mean over the run | final per seed | "
+             "pre-training updates | peak (fall to final) |", "|---|--:|--:|--:|--:|--:|--:|"]
+    for s in summary:
+        gone = s.get("seeds_diverged") or []
+        variant = s["variant"] + (f" ({len(gone)} seed(s) diverged, left out)" if gone else "")
+        per_seed = " ".join("–" if not _known(x) else f"{x:.0f}" for x in s["final_scores"])
+        peak = s.get("peak_score_mean")
+        peak = f"{peak:.1f} at {s['peak_update']:,} ({s['fall_from_peak']:.1f})" if _known(peak) else "n/a"
+        lines.append(f"| {variant} | {_est(s['final_iqm'])} | {_est(s['last_iqm'])} | {_est(s['auc_iqm'])} | "
+                     f"{per_seed} | {s['pretrain_updates']:,} | {peak} |")
+    by_label = {s["variant"]: s for s in summary}
+    for s in summary:
+        vs = s.get("vs_reference")
+        if not vs:
+            continue
+        ref = by_label[vs["reference"]]
+        trend = ref.get("asymptote_trend")
+        lines += ["", f"{s['variant']} vs {ref['variant']}: updates to each threshold per seed (pre-training "
+                      f"included; a censored seed never reached it and counts at the budget); speed-up = mean "
+                      f"updates of {ref['variant']} / of {s['variant']} [95 % CI]; ≥ where {ref['variant']} has "
+                      "censored seeds. From-scratch final "
+                      + (f"{ref['final_score_mean']:.1f}" if _known(ref["final_score_mean"]) else "n/a")
+                      + (f", its trend {_est(trend, '+.1f')} over the last 20 % of evaluations: "
+                         + ("flat, an asymptote" if ref.get("asymptote_flat") else "not flat, no asymptote")
+                         if trend else ""),
+                  "",
+                  f"| threshold | score | {s['variant']} | {ref['variant']} | speed-up (updates) "
+                  "| speed-up (seconds) |",
+                  "|---|--:|--:|--:|--:|--:|"]
+        for sp, a, b in zip(vs["speedup"], s["reach"], ref["reach"]):
+            mark = " (headline)" if sp["threshold"] == vs["headline"] else ""
+            lines.append(f"| {sp['threshold']}{mark} | {sp['score']:.1f} | {_per_seed(a)} | {_per_seed(b)} | "
+                         f"{_speedup(sp['updates'], sp['reference_censored'] > 0)} | "
+                         f"{_speedup(sp['seconds'], sp['reference_censored'] > 0)} |")
+        lines += ["", f"Probability that {s['variant']} beats {ref['variant']}: final score "
+                      f"{_est(vs['poi_final'], '.2f')}, mean over the run {_est(vs['poi_auc'], '.2f')}. "
+                      f"The paper's claim (fewer updates) at {vs['headline'] or 'no threshold'}: {vs['verdict']}."]
+    return "\n".join(lines)
+
+
+def _known(x) -> bool:
+    """A number summary.json has (null, or NaN, where there is none)."""
+    return x is not None and x == x
+
+
+def print_table(summary: list[dict]) -> None:
+    print(summary_table(summary))
+
+
+def resummarize(run_dir: Path, behaviour: float | None = None) -> list[dict]:
+    """The summary of a run directory recomputed from its config.json and curves.csv (with today's statistics);
+    the behaviour score from its summary.json where it recorded one, else `behaviour`."""
+    study = Study.from_json((run_dir / "config.json").read_text())
+    rows = read_curves(run_dir / "curves.csv")
+    check_curve_seeds(run_dir / "curves.csv", rows, study.seeds)
+    if (run_dir / "summary.json").is_file():
+        try:
+            saved = json.loads((run_dir / "summary.json").read_text())
+            behaviour = next((s["behaviour_score"] for s in saved if s.get("behaviour_score") is not None),
+                             behaviour)
+        except (json.JSONDecodeError, TypeError, AttributeError):
+            pass
+    return summarize(study, rows, pretrain_ends_of(rows), behaviour)
+
+
+def merge_runs(run_dirs: list[Path], out_dir: Path, behaviour: float | None = None) -> list[dict]:
+    """One study from runs of it that each trained some of its variants (say one process per variant on a GPU):
+    their variants and curves side by side in `out_dir` (config.json, curves.csv, summary.json, curves.png),
+    re-summarised, so that the from-scratch asymptote and the speed-ups reach every variant.  The runs must agree
+    on everything but their variants (and checkpoint interval); `out_dir` must not hold a run yet."""
+    if (out_dir / "config.json").exists():
+        raise FileExistsError(f"{out_dir} already holds a run; merge into a new directory")
+    studies = []
+    for d in run_dirs:
+        if not (d / "config.json").exists() or not (d / "curves.csv").exists():
+            raise FileNotFoundError(f"{d}: not a run directory (config.json and curves.csv expected)")
+        try:
+            studies.append(Study.from_json((d / "config.json").read_text()))
+        except ValueError as e:
+            raise ValueError(f"{d / 'config.json'}: {e}") from None
+    own = ("variants", "reference", "checkpoint_every", "keep_checkpoints")
+    shared = [{k: v for k, v in dataclasses.asdict(s).items() if k not in own} for s in studies]
+    for d, fields in zip(run_dirs[1:], shared[1:]):
+        if differ := [k for k in fields if fields[k] != shared[0][k]]:
+            raise ValueError(f"{d} is not the same study as {run_dirs[0]}: {', '.join(differ)} differ")
+    variants = tuple(v for s in studies for v in s.variants)
+    # a run without the from-scratch variant names no reference; the one that trained it does
+    references = sorted({s.reference for s in studies if s.reference is not None})
+    if len(references) > 1:
+        raise ValueError(f"the runs name different reference variants: {', '.join(references)}")
+    reference = references[0] if references else None
+    study = dataclasses.replace(studies[0], variants=variants, reference=reference)  # checks labels are unique
+    rows = []
+    for d, s in zip(run_dirs, studies):
+        mine = read_curves(d / "curves.csv")
+        check_curve_seeds(d / "curves.csv", mine, s.seeds)
+        short = short_curves(mine, {v.label: s.updates for v in s.variants})
+        if short:
+            raise ValueError(f"{d / 'curves.csv'}: ends before the run's {s.updates:,} updates ("
+                             f"{', '.join(f'{label} at {u or 0:,}' for label, u in short.items())}); merge finished "
+                             "runs")
+        rows += mine
+        if behaviour is None and (d / "summary.json").is_file():
+            try:
+                behaviour = next((x["behaviour_score"] for x in json.loads((d / "summary.json").read_text())
+                                  if x.get("behaviour_score") is not None), None)
+            except (json.JSONDecodeError, TypeError, AttributeError):
+                pass
+    ends = pretrain_ends_of(rows)
+    summary = summarize(study, rows, ends, behaviour)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    records = [r for d in run_dirs for r in json.loads((d / "config.json").read_text()).get("runs", [])]
+    atomic_write_text(out_dir / "config.json", study.record_json(previous=json.dumps({"runs": records})))
+    write_curves(out_dir / "curves.csv", rows)
+    atomic_write_text(out_dir / "summary.json", summary_json(summary))
+    plot_curves(out_dir / "curves.png", study, rows, ends)
+    return summary
