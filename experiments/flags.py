@@ -158,7 +158,8 @@ def run_args(parser: argparse.ArgumentParser, updates: int | None, eval_every: i
              eval_episodes: int = 10) -> None:
     """The run flags; `updates`/`eval_every` None leaves that flag out (a study that sets it itself)."""
     g = parser.add_argument_group("run")
-    g.add_argument("--seeds", type=positive_int, default=seeds, help="number of seeds, the member axis of one program (default %(default)s)")
+    g.add_argument("--seeds", type=positive_int, default=seeds,
+                   help="number of seeds, the member axis of one program (default %(default)s)")
     g.add_argument("--seed-offset", type=seed_int, default=0, help="first seed (seeds are offset..offset+N-1)")
     if updates is not None:
         g.add_argument("--updates", type=positive_int, default=updates,

@@ -37,7 +37,7 @@ from collections import defaultdict
 from pathlib import Path
 
 from experiments.common import OneLineParser
-from offrl_jax.aggregate import aggregate, aggregate_table, plot_aggregate
+from offrl_jax.aggregate import aggregate, aggregate_table, arms, claims_table, plot_aggregate
 from offrl_jax.cli import check_writable_dir, check_writable_file, print_error
 from offrl_jax.figures import behaviour_score, plot_studies
 from offrl_jax.results import check_curve_seeds, read_curves, short_curves
@@ -181,7 +181,9 @@ def main(argv=None) -> int:
                 study_dirs.append(path.parent)
                 found.append(summary)
         if len(found) > 1:
-            print(aggregate_table(aggregate(found)) + "\n")
+            print(claims_table(found, [str(d) for d in study_dirs]) + "\n")
+            if arms(found):
+                print(aggregate_table(aggregate(found)) + "\n")
         if args.aggregate is not None:
             if len(found) < 2:
                 raise ValueError("--aggregate takes two or more studies")

@@ -66,6 +66,28 @@ def aggregate_table(result: dict) -> str:
     return "\n".join(lines)
 
 
+def claims_table(summaries: list[list[dict]], names: list[str]) -> str:
+    """One row per comparison of every study (`names`: how to call each): seeds, the headline threshold, the
+    speed-up with its interval (≥: the reference has censored seeds), the probability of improvement of the
+    final score, and the verdict."""
+    lines = ["| study | variant vs reference | seeds | headline threshold | speed-up (updates) | P(final better) | "
+             "fewer updates? |", "|---|---|--:|---|--:|--:|---|"]
+    for name, summary in zip(names, summaries):
+        for s in summary:
+            vs = s.get("vs_reference")
+            if not vs:
+                continue
+            head = next((x for x in vs["speedup"] if x["threshold"] == vs["headline"]), None)
+            ratio = "n/a" if head is None else stats.Estimate.from_json(head["updates"]).text(".2f", "x")
+            if head is not None and head["reference_censored"] and ratio != "n/a":
+                ratio = "≥ " + ratio
+            threshold = "n/a" if head is None else f"{vs['headline']} ({head['score']:.1f})"
+            verdict = {"holds": "yes", "does not hold": "no"}.get(vs["verdict"], vs["verdict"])
+            lines.append(f"| {name} | {s['variant']} vs {vs['reference']} | {len(s['seeds'])} | {threshold} | "
+                         f"{ratio} | {stats.Estimate.from_json(vs['poi_final']).text('.2f')} | {verdict} |")
+    return "\n".join(lines)
+
+
 def common_updates(curves: list[list[dict]], arm: str) -> np.ndarray:
     """The evaluation updates that every study's `arm` has."""
     grids = [set(score_matrix(rows, arm)[0].tolist()) for rows in curves]

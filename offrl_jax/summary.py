@@ -157,7 +157,9 @@ def compare(mine: dict, ref: dict) -> dict:
 
 
 def verdict(speedup: dict | None, seeds: int) -> str:
-    """'holds' when the speed-up's interval lies above 1, 'does not hold' below or at 1, else 'undecided'."""
+    """Whether a variant reaches the headline threshold in fewer updates than its reference (for pre-training
+    against from scratch: the paper's claim): 'holds' when the speed-up's interval lies above 1, 'does not hold'
+    when it lies at or below 1, else 'undecided: <why>'."""
     if speedup is None:
         return "undecided: no threshold"
     if seeds < 2:
@@ -172,6 +174,10 @@ def verdict(speedup: dict | None, seeds: int) -> str:
     if ratio.high <= 1:
         return "does not hold"
     return "undecided: the interval holds 1"
+
+
+VERDICT_WORDS = {"holds": "yes (the speed-up's interval lies above 1)",
+                 "does not hold": "no (the speed-up's interval lies at or below 1)"}
 
 
 def summary_json(summary: list[dict]) -> str:
@@ -233,7 +239,7 @@ def summary_table(summary: list[dict]) -> str:
         lines += ["", f"{s['variant']} vs {ref['variant']}: updates to each threshold per seed (pre-training "
                       f"included; a censored seed never reached it and counts at the budget); speed-up = mean "
                       f"updates of {ref['variant']} / of {s['variant']} [95 % CI]; ≥ where {ref['variant']} has "
-                      "censored seeds. From-scratch final "
+                      f"censored seeds. {ref['variant']}'s final "
                       + (f"{ref['final_score_mean']:.1f}" if _known(ref["final_score_mean"]) else "n/a")
                       + (f", its trend {_est(trend, '+.1f')} over the last 20 % of evaluations: "
                          + ("flat, an asymptote" if ref.get("asymptote_flat") else "not flat, no asymptote")
@@ -249,7 +255,8 @@ def summary_table(summary: list[dict]) -> str:
                          f"{_speedup(sp['seconds'], sp['reference_censored'] > 0)} |")
         lines += ["", f"Probability that {s['variant']} beats {ref['variant']}: final score "
                       f"{_est(vs['poi_final'], '.2f')}, mean over the run {_est(vs['poi_auc'], '.2f')}. "
-                      f"The paper's claim (fewer updates) at {vs['headline'] or 'no threshold'}: {vs['verdict']}."]
+                      f"{s['variant']} needs fewer updates than {ref['variant']} to reach "
+                      f"{vs['headline'] or 'a threshold'}: {VERDICT_WORDS.get(vs['verdict'], vs['verdict'])}."]
     return "\n".join(lines)
 
 
