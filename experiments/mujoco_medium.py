@@ -57,8 +57,9 @@ def parser(prog: str = "experiments.mujoco_medium", doc: str = __doc__, updates:
         help="pre-training modes to compare, one variant each (default: actor+critic none)")
     add("--pretrain-updates", type=pretrain_budget, default=None,
         help=f"N, or auto[:CAP] to end each pre-training phase when its supervised losses improve by less than 1 %% "
-             f"per 1k updates (every seed; capped at CAP or the default; the rest goes to offline RL).  Default: "
-             f"10k TD3+BC, {edac['pretrain_updates'] // 1000}k EDAC")
+             f"per 1k updates (every seed; capped at CAP or the default; the rest goes to offline RL; --eval-every "
+             f"must then be a multiple of 1000, e.g. 5000).  "
+             f"Default: 10k TD3+BC, {edac['pretrain_updates'] // 1000}k EDAC")
     help_authors = ("authors: the authors' code switch by switch (LayerNorm without scale/bias and eps 1e-5, "
                     "PyTorch init, a 3x256 TD3+BC actor, no bootstrap at time-outs, x/sg(x) loss balancing, the "
                     "paper's per-env alphas; docs/fidelity.md); flags given with it override single values")
