@@ -1,8 +1,9 @@
 """Command-line flags: the run flags every experiment shares (`run_args`), and the flags generated from the
 algorithm config dataclasses, one per config field.
 
-A field declared in `TD3BCConfig` or `EDACConfig` (`offrl_jax/algos/`) becomes `--field-name`, typed from its
-annotation, with the comment beside (or above) the field as its help text.  So adding a hyper-parameter is one
+A field of a registered family's config (`offrl_jax.algos.FAMILIES`: `TD3BCConfig`, `SACNConfig`, and the
+`Config` they extend) becomes `--field-name`, typed from its annotation, with the comment beside (or above) the
+field as its help text.  So adding a hyper-parameter is one
 line in a config class: it reaches the command line, `config.json` and the losses from there.
 
     bool                      --name / --no-name
@@ -27,12 +28,12 @@ import typing
 from pathlib import Path
 from typing import Any
 
-from offrl_jax.algos.edac import EDACConfig
-from offrl_jax.algos.td3bc import TD3BCConfig
+from offrl_jax.algos import FAMILIES
 from offrl_jax.cli import int_at_least, number, positive_int, seed_int
 from offrl_jax.loggers import LOGGERS
+from offrl_jax.study import MAX_MEMBERS
 
-CONFIGS = (TD3BCConfig, EDACConfig)
+CONFIGS = tuple(family.config for family in FAMILIES.values())
 # fields a study sets through its own flags or its algorithm choice, never one-by-one
 NOT_FLAGS = frozenset({"pretrain", "pretrain_updates", "pretrain_auto", "bc_only"})
 # the fields that have a flag (`add_config_flags` leaves out a study's `omit` too)
@@ -42,20 +43,30 @@ ALIASES = {"actor_layer_norm": ("--actor-ln",), "critic_layer_norm": ("--critic-
 
 
 def field_comments(cls: type) -> dict[str, str]:
-    """{field: its comment}: the `# ...` after the field on its line, after any comment lines just above it."""
+    """{field: its comment}: the `# ...` after the field on its line, after any comment lines just above it; a field a
+    class re-declares without a comment (a new default) keeps the comment of the class it extends."""
     comments: dict[str, str] = {}
-    above: list[str] = []
-    for line in inspect.getsource(cls).splitlines()[1:]:
-        text = line.strip()
-        if text.startswith("#"):
-            above.append(text.lstrip("# "))
-            continue
-        match = re.match(r"([a-z_][a-z0-9_]*)\s*:", text)
-        if match and not text.startswith(("def ", "class ", "@")):
-            trailing = line.split("  # ", 1)[1].strip() if "  # " in line else ""
-            comments[match.group(1)] = " ".join(above + ([trailing] if trailing else []))
-        above = []
+    for klass in reversed([k for k in cls.__mro__ if dataclasses.is_dataclass(k)]):
+        above: list[str] = []
+        for line in inspect.getsource(klass).splitlines()[1:]:
+            text = line.strip()
+            if text.startswith("#"):
+                above.append(text.lstrip("# "))
+                continue
+            match = re.match(r"([a-z_][a-z0-9_]*)\s*:", text)
+            if match and not text.startswith(("def ", "class ", "@")):
+                trailing = line.split("  # ", 1)[1].strip() if "  # " in line else ""
+                comment = " ".join(above + ([trailing] if trailing else []))
+                if comment or match.group(1) not in comments:
+                    comments[match.group(1)] = comment
+            above = []
     return comments
+
+
+def _family_name(cls: type) -> str:
+    """The family a config class belongs to, as `--help` names it (a registered family's name, else the class's)."""
+    return next((name for name, family in FAMILIES.items() if family.config is cls),
+                cls.__name__.removesuffix("Config").lower())
 
 
 def _fields(configs: tuple[type, ...] = CONFIGS) -> dict[str, dict[str, Any]]:
@@ -66,7 +77,7 @@ def _fields(configs: tuple[type, ...] = CONFIGS) -> dict[str, dict[str, Any]]:
         for f in dataclasses.fields(cls):
             entry = found.setdefault(f.name, {"type": hints[f.name], "defaults": {}, "comment": "",
                                               "sweepable": False})
-            entry["defaults"][cls.__name__.removesuffix("Config").lower()] = f.default
+            entry["defaults"][_family_name(cls)] = f.default
             entry["comment"] = entry["comment"] or comments.get(f.name, "")
             entry["sweepable"] |= f.name in cls.SWEEPABLE
     return found
@@ -154,11 +165,20 @@ def plain_path(text: str) -> Path:
     return Path(text)
 
 
+def seed_count(text: str) -> int:
+    """--seeds: a positive integer up to `MAX_MEMBERS` (a variant's seeds are one program, all in memory at once)."""
+    value = positive_int(text)
+    if value > MAX_MEMBERS:
+        raise argparse.ArgumentTypeError(f"expected a positive integer up to {MAX_MEMBERS:,} (a variant's seeds train "
+                                         f"as one program, every seed's networks in memory at once), got {text!r}")
+    return value
+
+
 def run_args(parser: argparse.ArgumentParser, updates: int | None, eval_every: int | None, seeds: int = 3,
              eval_episodes: int = 10) -> None:
     """The run flags; `updates`/`eval_every` None leaves that flag out (a study that sets it itself)."""
     g = parser.add_argument_group("run")
-    g.add_argument("--seeds", type=positive_int, default=seeds,
+    g.add_argument("--seeds", type=seed_count, default=seeds,
                    help="number of seeds, the member axis of one program (default %(default)s)")
     g.add_argument("--seed-offset", type=seed_int, default=0, help="first seed (seeds are offset..offset+N-1)")
     if updates is not None:

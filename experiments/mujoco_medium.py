@@ -24,9 +24,7 @@ import argparse
 
 from experiments.common import OneLineParser, UsageError, main_guard, positive_int, study_fields
 from experiments.flags import FLAG_FIELDS, add_config_flags, config_values, run_args, sweepable_fields
-from offrl_jax.algos import ALGOS, PRESETS, preset_values
-from offrl_jax.algos.edac import EDACConfig
-from offrl_jax.algos.td3bc import TD3BCConfig
+from offrl_jax.algos import ALGOS, PRESETS, SACNConfig, preset_values
 from offrl_jax.study import Study, Variant
 
 ENVS = ("hopper", "halfcheetah", "walker2d")
@@ -42,7 +40,7 @@ def parser(prog: str = "experiments.mujoco_medium", doc: str = __doc__, updates:
     """The flags every MuJoCo study shares; studies pass their own defaults (`edac_pretrain`: the study's EDAC
     `pretrain_updates` / `actor_pretrain_fraction`, and `num_critics`, for the help text), leave out the flags
     they set themselves (`omit`: destinations, e.g. ("pretrain", "lam")), and only the main job has `--preset`."""
-    edac = {f: getattr(EDACConfig, f) for f in ("pretrain_updates", "actor_pretrain_fraction")} | (edac_pretrain or {})
+    edac = {f: getattr(SACNConfig, f) for f in ("pretrain_updates", "actor_pretrain_fraction")} | (edac_pretrain or {})
     p = OneLineParser(prog=prog, description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
     group = p.add_argument_group("what to compare")
 
@@ -114,7 +112,7 @@ def build(args) -> Study | list[Study]:
             raise UsageError(f"--preset paper sets {', '.join(changed)} itself; leave them out")
         return [make_study(env, algo, "medium", args, dict(updates=1_000_000, eval_every=10_000))
                 for env in ENVS for algo in ("td3bc", "edac")]
-    if args.alpha is None and not presets and ALGOS[args.algo][0] is TD3BCConfig:
+    if args.alpha is None and not presets and ALGOS[args.algo].family == "td3bc":
         args.alpha = [MAIN_JOB_ALPHA]
     return make_study(args.env, args.algo, args.level, args)
 

@@ -32,7 +32,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from offrl_jax import distributed
-from offrl_jax.algos import make_algorithm, make_config
+from offrl_jax.algos import make_algorithm
 from offrl_jax.checkpoint import atomic_write_text, load_checkpoint, save_checkpoint
 from offrl_jax.data.dataset import Dataset
 from offrl_jax.driver import Driver, device_data
@@ -192,7 +192,7 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
     """Train one variant (S vmapped seeds), or a sweep group (values x seeds in one vmapped program), evaluating
     between chunks; returns the number of pre-training updates."""
     first_variant, labels, seeds = group[0], [v.label for v in group], study.seeds
-    config = make_config(first_variant.algo, study.env, study.dataset, **dict(first_variant.overrides))
+    config = study.config(first_variant.label)
     algo = make_algorithm(config, ds.obs_dim, ds.act_dim, len(ds))
     data, (obs_mean, obs_std) = device_data(ds, config.gamma)
     sweep = (swept, tuple(float(dict(v.overrides)[swept]) for v in group)) if swept else None

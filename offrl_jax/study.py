@@ -10,7 +10,7 @@ import dataclasses
 import json
 from typing import Any
 
-from offrl_jax.algos import ALGOS, make_algorithm, make_config
+from offrl_jax.algos import Config, family_of, make_algorithm, make_config
 from offrl_jax.data.dataset import Dataset
 from offrl_jax.driver import check_call_grid
 from offrl_jax.envs import get_env_spec
@@ -46,6 +46,9 @@ class Variant:
     @staticmethod
     def of(label: str, algo: str, **overrides: Any) -> Variant:
         return Variant(label, algo, tuple(sorted(overrides.items())))
+
+
+MAX_MEMBERS = 1024  # seeds (x sweep values) trained as one program: ~3 MB each for TD3+BC, ~30 for EDAC on 1M rows
 
 
 @dataclasses.dataclass(frozen=True)
@@ -113,10 +116,23 @@ class Study:
         if self.reference is not None and not any(reference_label(self, label) for label in labels):
             raise ValueError(f"Study.reference = {self.reference!r} is not a variant label ({', '.join(labels)})")
         get_env_spec(self.env)
-        for v in self.variants:  # every variant's hyper-parameters and budget are checked before anything is written
-            config = make_config(v.algo, self.env, self.dataset, **dict(v.overrides))
+        # every variant's config, resolved once (registry, per-env defaults, preset, overrides) and checked with its
+        # budget before anything is written; everyone reads it from here (`config`)
+        configs = {v.label: make_config(v.algo, self.env, self.dataset, **dict(v.overrides)) for v in self.variants}
+        for config in configs.values():
             phases = make_algorithm(config, obs_dim=1, act_dim=1, num_transitions=1).phases(self.updates)
             check_call_grid(phases, self.eval_every)
+        object.__setattr__(self, "_configs", configs)  # not a field: not in to_json, equality or replace
+        widest = max(len(group) for group, _ in self.groups()) * len(self.seeds)
+        if widest > MAX_MEMBERS:
+            what = f"{len(self.seeds)} seeds" + (" x sweep values" if widest > len(self.seeds) else "")
+            raise ValueError(f"Study.seeds: {what} make {widest:,} members of one program, over the {MAX_MEMBERS:,} "
+                             "this library trains at once (every member's networks and optimiser state are in memory "
+                             "together)")
+
+    def config(self, label: str) -> Config:
+        """The resolved, frozen config of the variant labelled `label`."""
+        return self._configs[label]
 
     def groups(self) -> list[tuple[tuple[Variant, ...], str | None]]:
         """The programs the study trains: (variants, swept name) each; a vmapped sweep group, or one variant alone
@@ -128,8 +144,7 @@ class Study:
 
     def resolved(self) -> dict[str, dict[str, Any]]:
         """{label: every field of the variant's algorithm config, after per-env defaults, preset and overrides}."""
-        return {v.label: dataclasses.asdict(make_config(v.algo, self.env, self.dataset, **dict(v.overrides)))
-                for v in self.variants}
+        return {label: dataclasses.asdict(config) for label, config in self._configs.items()}
 
     def record_json(self, ds: Dataset | None = None, previous: str | None = None,
                     data_sha256: str | None = None) -> str:
@@ -210,5 +225,5 @@ def _swept_name(a: Variant, b: Variant) -> str | None:
     diff = [k for k in sorted(da.keys() | db.keys()) if da.get(k) != db.get(k)]
     if len(diff) != 1 or diff[0] not in da or diff[0] not in db:
         return None
-    sweepable = ALGOS[a.algo][0].SWEEPABLE
+    sweepable = family_of(a.algo).config.SWEEPABLE
     return diff[0] if diff[0] in sweepable and all(isinstance(d[diff[0]], (int, float)) for d in (da, db)) else None

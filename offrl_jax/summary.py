@@ -21,7 +21,6 @@ from pathlib import Path
 import numpy as np
 
 from offrl_jax import stats
-from offrl_jax.algos import make_config
 from offrl_jax.checkpoint import atomic_write_text
 from offrl_jax.results import (
     all_nan_expected,
@@ -89,7 +88,7 @@ def _summarize(study: Study, rows: list[dict], pretrain_ends: dict[str, int], be
         thresholds = ([("behaviour data", behaviour)] if behaviour is not None else []) + [
             (f"{f:.0%} of best", fraction_of(best, f)) for f in FRACTIONS if best is not None] + [
             (f"{f:.0%} of asymptote", fraction_of(asymptote, f)) for f in FRACTIONS if flat]
-        config = make_config(v.algo, study.env, study.dataset, **dict(v.overrides))
+        config = study.config(v.label)
         mean_curve = np.nanmean(scores, axis=0) if len(updates) else np.array([np.nan])
         peak = int(np.nanargmax(mean_curve)) if np.isfinite(mean_curve).any() else None
         last = scores[:, -1] if len(updates) else np.full(len(study.seeds), np.nan)

@@ -8,7 +8,7 @@ import jax
 import numpy as np
 import pytest
 
-from offrl_jax.algos import ALGOS, make_config
+from offrl_jax.algos import ALGOS, FAMILIES, make_config
 from offrl_jax.driver import Driver, device_data
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "extending.md"
@@ -17,10 +17,12 @@ DOC = Path(__file__).resolve().parents[1] / "docs" / "extending.md"
 @pytest.fixture
 def doc_namespace(monkeypatch, tmp_path):
     """Every tested block of the doc, each run as a module file of its own (so `inspect` finds its source)."""
-    monkeypatch.setattr("offrl_jax.algos.ALGOS", dict(ALGOS))  # the registry example must not leak into other tests
+    # the registry examples must not leak into other tests
+    monkeypatch.setattr("offrl_jax.algos.ALGOS", dict(ALGOS))
+    monkeypatch.setattr("offrl_jax.algos.FAMILIES", dict(FAMILIES))
     marker = "(tested: tests/test_extending.py)"
     blocks = [b for b in re.findall(r"```python\n(.*?)```", DOC.read_text(), re.S) if marker in b]
-    assert len(blocks) == 3
+    assert len(blocks) == 4
     namespace: dict = {}
     for i, block in enumerate(blocks):
         path = tmp_path / f"extending_block_{i}.py"
@@ -44,10 +46,10 @@ def test_every_config_field_has_a_flag():
 
     from experiments.flags import NOT_FLAGS
     from experiments.mujoco_medium import make_parser
-    from offrl_jax.algos import EDACConfig, TD3BCConfig
+    from offrl_jax.algos import FAMILIES
 
     dests = {a.dest for a in make_parser()._actions}
-    for cls in (TD3BCConfig, EDACConfig):
+    for cls in (family.config for family in FAMILIES.values()):
         for f in dataclasses.fields(cls):
             assert f.name in dests or f.name in NOT_FLAGS or f.name == "pretrain_auto", f.name
     assert {"pretrain", "pretrain_updates"} <= dests  # the study's own flags for those
@@ -76,3 +78,49 @@ def test_sequential_pretraining_example_runs_its_three_phases(doc_namespace, tin
     for a, b in zip(actors[0], actors[1]):  # the critic phase leaves the BC actor as it was
         np.testing.assert_array_equal(a, b)
     assert any(not np.array_equal(a, b) for a, b in zip(actors[1], actors[3]))  # TD3+BC then trains it
+
+
+def test_new_family_example_runs_through_the_runner(doc_namespace, tmp_path, tiny_dataset):
+    """The doc's family is its file plus two registry lines: its config is checked, and a study trains, evaluates,
+    summarises and resumes it as it does the built-in families."""
+    import json
+
+    from offrl_jax import algos
+    from offrl_jax.results import read_curves
+    from offrl_jax.runner import run_study
+    from offrl_jax.study import Study, Variant
+
+    assert "mse_bc" in algos.FAMILIES and "mse_bc" not in FAMILIES
+    with pytest.raises(ValueError, match="MSEBCConfig.weight_decay = -1.0 must be >= 0"):
+        algos.make_config("mse_bc", "hopper", weight_decay=-1.0)
+    with pytest.raises(ValueError, match="MSEBCConfig.gamma = 1.5 must be in"):  # the shared fields' checks
+        algos.make_config("mse_bc", "hopper", gamma=1.5)
+    study = Study(name="t", dataset="synthetic", env="hopper", seeds=(0, 1), updates=200, eval_every=100,
+                  eval_episodes=1, batch_size=32,
+                  variants=(Variant.of("BC", "mse_bc", weight_decay=1e-4, hidden=(16, 16)),))
+    run_study(study, tmp_path, tiny_dataset, progress=False)
+    rows = read_curves(tmp_path / "curves.csv")
+    assert [(r["update"], r["seed"]) for r in rows] == [(100, 0), (100, 1), (200, 0), (200, 1)]
+    assert json.loads((tmp_path / "config.json").read_text())["resolved"]["BC"]["weight_decay"] == 1e-4
+    (summary,) = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["variant"] == "BC"
+
+
+def test_a_run_resolves_each_config_once(monkeypatch, tmp_path, tiny_dataset):
+    """A variant's config is built once, when its study is: the runner, the summary and the resume check read it
+    from the study."""
+    from offrl_jax import study as study_module
+    from offrl_jax.runner import run_study
+    from offrl_jax.study import Study, Variant
+
+    calls = []
+    real = study_module.make_config
+    monkeypatch.setattr(study_module, "make_config", lambda *a, **k: calls.append(a[0]) or real(*a, **k))
+    study = Study(name="t", dataset="synthetic", env="hopper", seeds=(0,), updates=200, eval_every=100,
+                  eval_episodes=1, batch_size=32,
+                  variants=(Variant.of("a", "td3bc", hidden=(16, 16), pretrain_updates=100),
+                            Variant.of("b", "bc", hidden=(16, 16))))
+    assert calls == ["td3bc", "bc"]
+    run_study(study, tmp_path, tiny_dataset, progress=False)
+    run_study(study, tmp_path, tiny_dataset, progress=False, resume=True)  # the resume check included
+    assert calls == ["td3bc", "bc"], calls

@@ -40,16 +40,16 @@ from offrl_jax.study import Study, Variant
     ("td3bc", {"actor_hidden": "256"}, "TD3BCConfig.actor_hidden = '256' must be a tuple of integers or None"),
     ("td3bc", {"policy_delay": 2.0}, "TD3BCConfig.policy_delay = 2.0 must be an integer"),
     ("td3bc", {"policy_delay": True}, "TD3BCConfig.policy_delay = True must be an integer"),
-    ("edac", {"num_critics": 10.0}, "EDACConfig.num_critics = 10.0 must be an integer"),
+    ("edac", {"num_critics": 10.0}, "SACNConfig.num_critics = 10.0 must be an integer"),
     ("td3bc", {"actor_layer_norm": 1}, "TD3BCConfig.actor_layer_norm = 1 must be True or False"),
-    ("edac", {"backup_entropy": "no"}, "EDACConfig.backup_entropy = 'no' must be True or False"),
+    ("edac", {"backup_entropy": "no"}, "SACNConfig.backup_entropy = 'no' must be True or False"),
     ("td3bc", {"init": 3}, "TD3BCConfig.init = 3 must be a string"),
     ("td3bc", {"lambda_mode": "both"}, "TD3BCConfig.lambda_mode = 'both' must be 'loss' or 'target'"),
     ("td3bc", {"pretrain": ["actor"]}, "TD3BCConfig.pretrain = ['actor'] must be one of none, actor"),
-    ("edac", {"hidden_bias": "0.1"}, "EDACConfig.hidden_bias = '0.1' must be a number or None"),
-    ("edac", {"log_std_bounds": (-5.0,)}, "EDACConfig.log_std_bounds = (-5.0,) must be a tuple of 2 finite numbers"),
-    ("edac", {"log_std_bounds": (-math.inf, 2.0)}, "EDACConfig.log_std_bounds = (-inf, 2.0) must be a tuple of 2"),
-    ("edac", {"log_std_bounds": ("a", 2.0)}, "EDACConfig.log_std_bounds = ('a', 2.0) must be a tuple of 2"),
+    ("edac", {"hidden_bias": "0.1"}, "SACNConfig.hidden_bias = '0.1' must be a number or None"),
+    ("edac", {"log_std_bounds": (-5.0,)}, "SACNConfig.log_std_bounds = (-5.0,) must be a tuple of 2 finite numbers"),
+    ("edac", {"log_std_bounds": (-math.inf, 2.0)}, "SACNConfig.log_std_bounds = (-inf, 2.0) must be a tuple of 2"),
+    ("edac", {"log_std_bounds": ("a", 2.0)}, "SACNConfig.log_std_bounds = ('a', 2.0) must be a tuple of 2"),
 ])
 def test_config_rejects(algo, overrides, message):
     with pytest.raises(ValueError) as err:

@@ -24,10 +24,6 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-import math
-import numbers
-import types
-import typing
 from collections.abc import Callable
 from typing import Any
 
@@ -36,15 +32,6 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 from flax import struct
-
-from offrl_jax.losses import BALANCES
-from offrl_jax.nets import INITS, Arch
-
-# What a TD target does at a time-out (the time limit cut the episode, the task did not end):
-#   "bootstrap"  r + gamma Q(s', a') as anywhere else (the state is not terminal)
-#   "stop"       r, as at a terminal (the authors' code: dones = terminals + timeouts)
-#   "drop"       the row is never sampled (CORL's loader drops it: its next observation is not recorded)
-TIMEOUTS = ("bootstrap", "stop", "drop")
 
 Params = Any
 Batch = dict[str, jax.Array]
@@ -156,108 +143,6 @@ def split_budget(total: int, pretrain: int) -> tuple[int, int]:
     if pretrain > total:
         raise ValueError(f"pre-training updates ({pretrain}) exceed the total budget ({total})")
     return pretrain, total - pretrain
-
-
-def _typed(annotation: Any, value: Any) -> tuple[bool, Any, str]:
-    """(value fits `annotation`, the value as the field stores it, what the field must be).  JSON's forms are
-    accepted and converted: a list for a tuple, an integer for a float; so are numpy's scalars."""
-    origin, args = typing.get_origin(annotation), typing.get_args(annotation)
-    if origin in (typing.Union, types.UnionType):  # X | None
-        if value is None and type(None) in args:
-            return True, None, ""
-        inner = [a for a in args if a is not type(None)]
-        if len(inner) != 1:
-            return True, value, ""
-        ok, value, need = _typed(inner[0], value)
-        return ok, value, need + (" or None" if type(None) in args else "")
-    if annotation is bool:
-        return isinstance(value, (bool, np.bool_)), bool(value) if isinstance(value, np.bool_) else value, \
-            "must be True or False"
-    if annotation is int:
-        ok = isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_))
-        return ok, int(value) if ok else value, "must be an integer"
-    if annotation is float:
-        ok = isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
-        try:
-            return ok, float(value) if ok else value, "must be a number"
-        except OverflowError:  # an integer too large for a float
-            return False, value, "must be a finite number"
-    if annotation is str:
-        return isinstance(value, str), value, "must be a string"
-    if origin is typing.Literal:
-        need = f"must be {args[0]!r} or {args[1]!r}" if len(args) == 2 else f"must be one of {', '.join(args)}"
-        return isinstance(value, str) and value in args, value, need
-    if origin is tuple:
-        element = args[0]
-        need = (f"must be a tuple of {'integers' if element is int else 'numbers'}" if args[1:] == (...,) else
-                f"must be a tuple of {len(args)} {'integers' if element is int else 'finite numbers'}")
-        if not isinstance(value, (tuple, list)) or (args[1:] != (...,) and len(value) != len(args)):
-            return False, value, need
-        items = [_typed(element, x) for x in value]
-        ok = all(fits for fits, _, _ in items) and all(
-            math.isfinite(x) for _, x, _ in items if element is float and isinstance(x, float))
-        return ok, tuple(x for _, x, _ in items) if ok else value, need
-    return True, value, ""  # an annotation this check does not know: the config's own checks decide
-
-
-def check_types(cfg) -> None:
-    """Check every field of a config dataclass against its annotation, before the value checks, and store JSON's
-    forms as the annotation says (see `_typed`), so a config read back from config.json equals the one written."""
-    hints = typing.get_type_hints(type(cfg))
-    for field in dataclasses.fields(cfg):
-        value = getattr(cfg, field.name)
-        ok, typed, need = _typed(hints[field.name], value)
-        if not ok:
-            raise ValueError(f"{type(cfg).__name__}.{field.name} = {value!r} {need}")
-        if typed is not value:
-            object.__setattr__(cfg, field.name, typed)  # frozen dataclass
-
-
-def validate_common(cfg) -> None:
-    """Reject invalid hyper-parameters with one line naming the field (shared by every config): the types first
-    (`check_types`), then the values."""
-    check_types(cfg)
-    for field in dataclasses.fields(cfg):
-        value = getattr(cfg, field.name)
-        if isinstance(value, float) and not math.isfinite(value):
-            raise ValueError(f"{type(cfg).__name__}.{field.name} = {value!r} must be a finite number")
-    checks = [
-        ("gamma", 0.0 < cfg.gamma < 1.0, "must be in (0, 1) (a time-out's return tail is r / (1 - gamma))"),
-        ("tau", 0.0 < cfg.tau <= 1.0, "must be in (0, 1]"),
-        ("lam", 0.0 <= cfg.lam <= 1.0, "must be in [0, 1]"),
-        ("actor_lr", cfg.actor_lr > 0, "must be positive"),
-        ("critic_lr", cfg.critic_lr > 0, "must be positive"),
-        ("pretrain_updates", cfg.pretrain_updates >= 0, "must be >= 0"),
-        ("pretrain_auto_window", cfg.pretrain_auto_window > 0, "must be positive"),
-        ("pretrain_auto_tol", cfg.pretrain_auto_tol >= 0, "must be >= 0"),
-        ("hidden", len(cfg.hidden) > 0 and all(h > 0 for h in cfg.hidden), "must be positive layer widths"),
-        ("pretrain", cfg.pretrain in ("none", "actor", "critic", "actor+critic"),
-         "must be one of none, actor, critic, actor+critic"),
-        ("lambda_mode", cfg.lambda_mode in ("loss", "target"), "must be 'loss' or 'target'"),
-        ("num_critics", cfg.num_critics >= 1, "must be >= 1"),
-        ("cql_actions", cfg.cql_actions >= 1, "must be >= 1"),
-        ("actor_hidden", cfg.actor_hidden is None or (len(cfg.actor_hidden) > 0 and all(h > 0 for h in
-                                                                                        cfg.actor_hidden)),
-         "must be positive layer widths"),
-        ("layer_norm_eps", cfg.layer_norm_eps > 0, "must be positive"),
-        ("init", cfg.init in INITS, f"must be one of {', '.join(INITS)}"),
-        ("timeouts", cfg.timeouts in TIMEOUTS, f"must be one of {', '.join(TIMEOUTS)}"),
-        ("balance", cfg.balance in BALANCES, f"must be one of {', '.join(BALANCES)}"),
-    ]
-    for name, ok, message in checks:
-        if not ok:
-            raise ValueError(f"{type(cfg).__name__}.{name} = {getattr(cfg, name)!r} {message}")
-
-
-def auto_stop_of(cfg, monitor: tuple[str, ...]) -> AutoStop | None:
-    """The stopping rule of a pre-training phase that watches `monitor`, or None when pre-training is fixed-length."""
-    return AutoStop(monitor, cfg.pretrain_auto_window, cfg.pretrain_auto_tol) if cfg.pretrain_auto else None
-
-
-def arch_of(cfg) -> Arch:
-    """The layer-building choices shared by every config (LayerNorm form, initialisation)."""
-    return Arch(layer_norm_affine=cfg.layer_norm_affine, layer_norm_eps=cfg.layer_norm_eps, init=cfg.init,
-                hidden_bias=getattr(cfg, "hidden_bias", None))
 
 
 def done_flags(batch: Batch, timeouts: str) -> jax.Array:

@@ -1,4 +1,4 @@
-"""The 'hard' family: a deterministic tanh actor and an ensemble of (twin) critics.
+"""The TD3+BC family (`td3bc`): a deterministic tanh actor and an ensemble of (twin) critics.
 
     BC           = the actor pre-training phase for the whole budget
     TD3+BC       = TD3 critic (clipped double-Q, smoothed target action) + TD3+BC actor (-lmbda Q + MSE)
@@ -23,8 +23,6 @@ from offrl_jax.algos.common import (
     Batch,
     Model,
     Phase,
-    arch_of,
-    auto_stop_of,
     chain,
     done_flags,
     first,
@@ -35,49 +33,23 @@ from offrl_jax.algos.common import (
     single,
     split_budget,
     uniform_actions,
-    validate_common,
 )
+from offrl_jax.algos.config import Config, check_cql_fields
 from offrl_jax.nets import CriticEnsemble, DeterministicActor
-
-PretrainMode = Literal["none", "actor", "critic", "actor+critic"]
 
 
 @dataclasses.dataclass(frozen=True)
-class TD3BCConfig:
+class TD3BCConfig(Config):
     alpha: float = 2.5  # TD3+BC's actor regularisation (hopper 10, halfcheetah 20, walker2d 5, Adroit 0.1 / pen 1)
-    actor_lr: float = 3e-4  # Adam learning rate of the actor
-    critic_lr: float = 3e-4  # Adam learning rate of the critics
-    gamma: float = 0.99  # discount
-    tau: float = 0.005  # Polyak rate of the target networks
     policy_noise: float = 0.2  # std of the target policy smoothing noise
     noise_clip: float = 0.5  # clip of the target policy smoothing noise
     policy_delay: int = 2  # critic updates per actor and target update (TD3)
-    hidden: tuple[int, ...] = (256, 256)  # critic hidden widths (and the actor's unless actor_hidden is set)
-    actor_hidden: tuple[int, ...] | None = None  # None: same as hidden (the authors' actor: 3 x 256)
-    actor_layer_norm: bool = True  # LayerNorm after every hidden layer of the actor (the paper: on)
-    critic_layer_norm: bool = True  # LayerNorm after every hidden layer of the critics (the paper: on)
-    layer_norm_affine: bool = True  # learned LN scale/bias; False = the authors' code (elementwise_affine=False)
-    layer_norm_eps: float = 1e-6  # flax's default; torch's (the authors') 1e-5
-    init: str = "flax"  # flax (lecun-normal, zero bias), torch (nn.Linear's default) or orthogonal
-    num_critics: int = 2  # critic ensemble size
-    timeouts: str = "bootstrap"  # TD target at a time-out: bootstrap, stop (the authors'), drop the row (CORL's)
     q_scale_eps: float = 1e-8  # lmbda = alpha / (mean|Q| + q_scale_eps); CORL and the authors: 0
     # TD3+BC+CQL: critic loss = TD/sg|TD| + cql_weight * CQL/sg|CQL| (0 = off)
     cql_weight: float = 0.0
     balance: str = "abs"  # the hybrid's normalisation: x / sg|x| (abs) or the authors' x / sg(x) (signed)
     cql_actions: int = 10  # CQL: uniform actions sampled per state
     cql_temperature: float = 1.0  # CQL: logsumexp temperature
-    # pre-training
-    pretrain: PretrainMode = "actor+critic"
-    pretrain_updates: int = 10_000
-    # pretrain_auto: each pre-training phase ends when its supervised losses stop improving (common.AutoStop: the
-    # mean over a window of updates improved by less than tol, relative, for every member), pretrain_updates is then
-    # the cap; the updates left go to offline RL
-    pretrain_auto: bool = False
-    pretrain_auto_window: int = 1_000  # must divide the evaluation interval
-    pretrain_auto_tol: float = 0.01
-    lam: float = 0.0  # TD weight in critic pre-training
-    lambda_mode: Literal["loss", "target"] = "loss"  # authors' normalised-loss mixing, or eq. 5 target mixing
     target: Literal["td", "max_mc"] = "td"  # offline-RL critic target; max_mc = Q-Transformer's max(MC, TD)
     bc_only: bool = False  # the BC baseline: actor pre-training for the whole budget
     # actor-only pre-training (pretrain="actor") Polyak-updates the actor's target; False = the authors' code, whose
@@ -88,7 +60,8 @@ class TD3BCConfig:
     SWEEPABLE: ClassVar[tuple[str, ...]] = ("alpha", "tau", "policy_noise", "noise_clip")
 
     def __post_init__(self):
-        validate_common(self)
+        super().__post_init__()
+        check_cql_fields(self)
         if self.policy_delay < 1:
             raise ValueError(f"TD3BCConfig.policy_delay = {self.policy_delay} must be >= 1")
         if self.pretrain_auto and self.pretrain_auto_window % self.policy_delay:
@@ -98,8 +71,6 @@ class TD3BCConfig:
             raise ValueError(f"TD3BCConfig.alpha = {self.alpha} must be >= 0")
         if not self.q_scale_eps >= 0:
             raise ValueError(f"TD3BCConfig.q_scale_eps = {self.q_scale_eps} must be >= 0")
-        if self.target not in ("td", "max_mc"):
-            raise ValueError(f"TD3BCConfig.target = {self.target!r} must be 'td' or 'max_mc'")
         if self.bc_only and (self.pretrain != "actor" or self.pretrain_auto):
             what = f"pretrain = {self.pretrain!r}" if self.pretrain != "actor" else "pretrain_auto = True"
             raise ValueError(f"TD3BCConfig.{what} has no effect on the BC baseline (bc_only: every update is a BC "
@@ -113,9 +84,9 @@ class TD3BCState:
 
 
 class TD3BC:
-    def __init__(self, config: TD3BCConfig, obs_dim: int, act_dim: int):
+    def __init__(self, config: TD3BCConfig, obs_dim: int, act_dim: int, num_transitions: int = 0):
         self.cfg, self.obs_dim, self.act_dim = config, obs_dim, act_dim
-        arch = arch_of(config)
+        arch = config.arch()
         self.actor = DeterministicActor(act_dim, config.actor_hidden or config.hidden, config.actor_layer_norm, arch)
         self.critic = CriticEnsemble(config.num_critics, config.hidden, config.critic_layer_norm, arch=arch)
         self.actor_tx = optax.adam(config.actor_lr)
@@ -145,7 +116,7 @@ class TD3BC:
             "actor+critic": chain(self.bc_update, self.mc_update),
         }.get(cfg.pretrain)
         monitor = {"actor": ("bc_loss",), "critic": ("mc_error",), "actor+critic": ("bc_loss", "mc_error")}
-        auto = auto_stop_of(cfg, monitor.get(cfg.pretrain, ()))
+        auto = cfg.auto_stop(monitor.get(cfg.pretrain, ()))
         phases = [Phase("pretrain", single(pretrain_fn), pre, auto_stop=auto)] if pre else []
         rl -= rl % cfg.policy_delay
         return phases + [Phase("offline_rl", self.rl_update, rl, updates_per_call=cfg.policy_delay)]

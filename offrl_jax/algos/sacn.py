@@ -1,4 +1,4 @@
-"""The 'soft' family: a tanh-Gaussian actor, an ensemble of N critics and a learned temperature.
+"""The SAC-N family (`sacn`): a tanh-Gaussian actor, an ensemble of N critics and a learned temperature.
 
     SAC-N    = SAC with the min over N critics
     EDAC     = SAC-N + eta * ensemble-diversity loss on the critics
@@ -12,7 +12,7 @@ with alpha carried over.  `actor+critic` runs both phases in that order (the pap
 from __future__ import annotations
 
 import dataclasses
-from typing import ClassVar, Literal
+from typing import ClassVar
 
 import jax
 import jax.numpy as jnp
@@ -24,8 +24,6 @@ from offrl_jax.algos.common import (
     Batch,
     Model,
     Phase,
-    arch_of,
-    auto_stop_of,
     chain,
     done_flags,
     gradient_step,
@@ -35,8 +33,8 @@ from offrl_jax.algos.common import (
     single,
     split_budget,
     uniform_actions,
-    validate_common,
 )
+from offrl_jax.algos.config import Config, check_cql_fields
 from offrl_jax.data.returns import soft_returns_to_go
 from offrl_jax.nets import (
     TANH_LOG_DETS,
@@ -48,28 +46,18 @@ from offrl_jax.nets import (
 
 
 @dataclasses.dataclass(frozen=True)
-class EDACConfig:
+class SACNConfig(Config):
     num_critics: int = 10  # critic ensemble size
-    eta: float = 1.0  # diversity weight (0 = SAC-N)
-    actor_lr: float = 3e-4  # Adam learning rate of the actor
-    critic_lr: float = 3e-4  # Adam learning rate of the critics
+    hidden: tuple[int, ...] = (256, 256, 256)
+    pretrain_updates: int = 20_000  # split between soft BC and critic regression by actor_pretrain_fraction
+    eta: float = 1.0  # EDAC's ensemble-diversity weight (0 = SAC-N)
     alpha_lr: float = 3e-4  # Adam learning rate of the entropy temperature
-    gamma: float = 0.99  # discount
-    tau: float = 0.005  # Polyak rate of the target networks
-    hidden: tuple[int, ...] = (256, 256, 256)  # critic hidden widths (and the actor's unless actor_hidden is set)
-    actor_hidden: tuple[int, ...] | None = None  # None: same as hidden
-    actor_layer_norm: bool = True  # LayerNorm after every hidden layer of the actor (the paper: on)
-    critic_layer_norm: bool = True  # LayerNorm after every hidden layer of the critics (the paper: on)
-    layer_norm_affine: bool = True  # learned LN scale/bias; False = the authors' code (elementwise_affine=False)
-    layer_norm_eps: float = 1e-6  # flax's default; torch's (the authors') 1e-5
-    init: str = "flax"  # flax (lecun-normal, zero bias), torch (nn.Linear's default) or orthogonal (CORL's CQL)
     hidden_bias: float | None = None  # constant hidden-layer bias; CORL's EDAC: 0.1
     out_init: bool = True  # final layers U(+-1e-3) actor, U(+-3e-3) critics (EDAC); False: the init scheme's own
     log_std_bounds: tuple[float, float] = (-5.0, 2.0)  # EDAC; CORL's CQL: (-20, 2)
     log_std_offset: float = 0.0  # added to the raw log-std before clipping; CORL's CQL: -1
     tanh_log_det: str = "exact"  # log(1 - tanh(u)^2): exact (softplus form) or eps (log(1 - a^2 + 1e-6), CORL)
     log_alpha_bound: float = 0.0  # > 0: log alpha clipped to +-bound after each offline-RL step (authors: 10)
-    timeouts: str = "bootstrap"  # TD target at a time-out: bootstrap, stop (the authors'), drop the row (CORL's)
     balance: str = "abs"  # EDAC+BC's normalisation: x / sg|x| (abs) or the authors' x / sg(x) (signed)
     init_alpha: float = 1.0  # initial entropy temperature
     backup_entropy: bool = True  # subtract alpha log pi(a'|s') in the TD target
@@ -77,18 +65,7 @@ class EDACConfig:
     cql_alpha: float = 0.0  # CQL: critic loss = TD + cql_alpha * CQL penalty (0 = off)
     cql_actions: int = 10  # CQL: uniform actions sampled per state
     cql_temperature: float = 1.0  # CQL: logsumexp temperature
-    pretrain: Literal["none", "actor", "critic", "actor+critic"] = "actor+critic"
-    pretrain_updates: int = 20_000  # split between soft BC and critic regression by actor_pretrain_fraction
     actor_pretrain_fraction: float = 0.5  # share of pretrain_updates spent on soft BC (the rest: critic regression)
-    # pretrain_auto: each pre-training phase ends when its supervised losses stop improving (common.AutoStop: the
-    # mean over a window of updates improved by less than tol, relative, for every member), pretrain_updates is then
-    # the cap; the updates left go to offline RL
-    pretrain_auto: bool = False
-    pretrain_auto_window: int = 1_000  # must divide the evaluation interval
-    pretrain_auto_tol: float = 0.01
-    lam: float = 0.0  # TD weight in critic pre-training (0 = pure MC; the paper: 0 or 0.1)
-    # how lam mixes: the authors' normalised losses (loss) or eq. 5's targets (target)
-    lambda_mode: Literal["loss", "target"] = "loss"
     entropy_batch: int = 16_384  # rows per batch when computing the per-state entropies for the soft returns
     # CQL (CORL's cql.py): temperature, actor and critic losses all from the state before the update; False = EDAC
     # (CORL's edac.py): temperature, then actor, then critic, each seeing the step before
@@ -97,39 +74,40 @@ class EDACConfig:
     SWEEPABLE: ClassVar[tuple[str, ...]] = ("eta", "tau")  # vmappable in one program (see common.with_hparams)
 
     def __post_init__(self):
-        validate_common(self)
+        super().__post_init__()
+        check_cql_fields(self)
         if self.entropy_batch < 1:
-            raise ValueError(f"EDACConfig.entropy_batch = {self.entropy_batch} must be >= 1")
+            raise ValueError(f"SACNConfig.entropy_batch = {self.entropy_batch} must be >= 1")
         if not self.eta >= 0:
-            raise ValueError(f"EDACConfig.eta = {self.eta} must be >= 0")
+            raise ValueError(f"SACNConfig.eta = {self.eta} must be >= 0")
         if self.eta > 0 and self.num_critics < 2:
-            raise ValueError(f"EDACConfig.num_critics = {self.num_critics} must be >= 2 for EDAC (eta > 0)")
+            raise ValueError(f"SACNConfig.num_critics = {self.num_critics} must be >= 2 for EDAC (eta > 0)")
         if not 0.0 <= self.actor_pretrain_fraction <= 1.0:
-            raise ValueError(f"EDACConfig.actor_pretrain_fraction = {self.actor_pretrain_fraction} must be in [0, 1]")
+            raise ValueError(f"SACNConfig.actor_pretrain_fraction = {self.actor_pretrain_fraction} must be in [0, 1]")
         if self.alpha_lr <= 0 or self.init_alpha <= 0:
-            raise ValueError("EDACConfig.alpha_lr and init_alpha must be positive")
+            raise ValueError("SACNConfig.alpha_lr and init_alpha must be positive")
         lo, hi = self.log_std_bounds
         if not lo < hi:
-            raise ValueError(f"EDACConfig.log_std_bounds = {self.log_std_bounds} must be (low, high) with low < high")
+            raise ValueError(f"SACNConfig.log_std_bounds = {self.log_std_bounds} must be (low, high) with low < high")
         if self.tanh_log_det not in TANH_LOG_DETS:
-            raise ValueError(f"EDACConfig.tanh_log_det = {self.tanh_log_det!r} must be one of "
+            raise ValueError(f"SACNConfig.tanh_log_det = {self.tanh_log_det!r} must be one of "
                              f"{', '.join(TANH_LOG_DETS)}")
         if not self.log_alpha_bound >= 0:
-            raise ValueError(f"EDACConfig.log_alpha_bound = {self.log_alpha_bound} must be >= 0")
+            raise ValueError(f"SACNConfig.log_alpha_bound = {self.log_alpha_bound} must be >= 0")
 
 
 @struct.dataclass
-class EDACState:
+class SACNState:
     actor: Model
     critic: Model
     log_alpha: Model
     soft_returns: jax.Array  # (T,) soft returns-to-go of this seed's own soft-BC policy (zeros until computed)
 
 
-class EDAC:
-    def __init__(self, config: EDACConfig, obs_dim: int, act_dim: int, num_transitions: int):
+class SACN:
+    def __init__(self, config: SACNConfig, obs_dim: int, act_dim: int, num_transitions: int):
         self.cfg, self.obs_dim, self.act_dim, self.num_transitions = config, obs_dim, act_dim, num_transitions
-        arch = arch_of(config)
+        arch = config.arch()
         self.actor = TanhGaussianActor(act_dim, config.actor_hidden or config.hidden, config.actor_layer_norm, arch,
                                        tuple(config.log_std_bounds), config.log_std_offset,
                                        1e-3 if config.out_init else None)
@@ -142,18 +120,18 @@ class EDAC:
         self.target_entropy = -float(act_dim)
 
     # ------------------------------------------------------------------------------------------------ set-up
-    def init(self, key: jax.Array) -> EDACState:
+    def init(self, key: jax.Array) -> SACNState:
         k_actor, k_critic = jax.random.split(key)
         obs, act = jnp.zeros((1, self.obs_dim)), jnp.zeros((1, self.act_dim))
         log_alpha = jnp.asarray(jnp.log(self.cfg.init_alpha), jnp.float32)
-        return EDACState(
+        return SACNState(
             actor=new_model(self.actor.init(k_actor, obs), self.actor_tx, with_target=False),
             critic=new_model(self.critic.init(k_critic, obs, act), self.critic_tx, with_target=True),
             log_alpha=new_model(log_alpha, self.alpha_tx, with_target=False),
             soft_returns=jnp.zeros((self.num_transitions,), jnp.float32),
         )
 
-    def act(self, state: EDACState, obs: jax.Array) -> jax.Array:
+    def act(self, state: SACNState, obs: jax.Array) -> jax.Array:
         mean, _ = self.actor.apply(state.actor.params, obs)
         return jnp.tanh(mean)
 
@@ -166,14 +144,14 @@ class EDAC:
         phases = []
         if actor_steps:
             phases.append(Phase("actor_pretrain", single(chain(self.temperature_update, self.soft_bc_update)),
-                                actor_steps, auto_stop=auto_stop_of(cfg, ("soft_bc_loss",))))
+                                actor_steps, auto_stop=cfg.auto_stop(("soft_bc_loss",))))
         if critic_steps:
             phases.append(Phase("critic_pretrain", single(self.soft_mc_update), critic_steps,
-                                on_start=self.compute_soft_returns, auto_stop=auto_stop_of(cfg, ("mc_error",))))
+                                on_start=self.compute_soft_returns, auto_stop=cfg.auto_stop(("mc_error",))))
         return phases + [Phase("offline_rl", single(self.rl_update), rl)]
 
     # ---------------------------------------------------------------------------------------- soft returns
-    def compute_soft_returns(self, state: EDACState, data: Batch, key: jax.Array) -> EDACState:
+    def compute_soft_returns(self, state: SACNState, data: Batch, key: jax.Array) -> SACNState:
         """Entropy -log pi(a~|s') at every next observation (in batches), folded into soft returns-to-go."""
         next_obs = data["next_observations"]
         n, size = next_obs.shape[0], self.cfg.entropy_batch
@@ -196,7 +174,7 @@ class EDAC:
     def sample_policy(self, actor_params, obs: jax.Array, key: jax.Array):
         return sample_tanh_gaussian(key, *self.actor.apply(actor_params, obs), self.cfg.tanh_log_det)
 
-    def td_target(self, state: EDACState, batch: Batch, key: jax.Array) -> jax.Array:
+    def td_target(self, state: SACNState, batch: Batch, key: jax.Array) -> jax.Array:
         next_action, next_log_prob = self.sample_policy(state.actor.params, batch["next_observations"], key)
         next_q = self.critic.apply(state.critic.target, batch["next_observations"], next_action)
         alpha = jnp.exp(state.log_alpha.params) if self.cfg.backup_entropy else 0.0
@@ -215,7 +193,7 @@ class EDAC:
         (grads,) = vjp(jnp.ones_like(q))
         return q, L.edac_diversity_loss(grads)
 
-    def cql_penalty(self, params, state: EDACState, batch: Batch, q_data: jax.Array, key: jax.Array):
+    def cql_penalty(self, params, state: SACNState, batch: Batch, q_data: jax.Array, key: jax.Array):
         m, obs, next_obs = self.cfg.cql_actions, batch["observations"], batch["next_observations"]
         k_rand, k_pi, k_next = jax.random.split(key, 3)
         obs_m = repeat_obs(obs, m)
@@ -227,7 +205,7 @@ class EDAC:
                                         self.cfg.cql_temperature)
 
     # ---------------------------------------------------------------------------------------------- losses
-    def critic_loss(self, params, state: EDACState, batch: Batch, key: jax.Array, pretraining: bool):
+    def critic_loss(self, params, state: SACNState, batch: Batch, key: jax.Array, pretraining: bool):
         cfg = self.cfg
         k_target, k_cql = jax.random.split(key)
         q, diversity = self.q_and_diversity(params, batch)
@@ -247,7 +225,7 @@ class EDAC:
             metrics["cql_penalty"] = penalty
         return loss + cfg.eta * diversity, metrics
 
-    def actor_loss(self, params, state: EDACState, batch: Batch, key: jax.Array):
+    def actor_loss(self, params, state: SACNState, batch: Batch, key: jax.Array):
         action, log_prob = self.sample_policy(params, batch["observations"], key)
         q = self.critic.apply(state.critic.params, batch["observations"], action)
         loss = L.sac_actor_loss(q, log_prob, jnp.exp(state.log_alpha.params))
@@ -257,7 +235,7 @@ class EDAC:
             loss = L.balance_losses(loss, bc, self.cfg.bc_weight, self.cfg.balance)
         return loss, metrics
 
-    def soft_bc_loss(self, params, state: EDACState, batch: Batch, key: jax.Array):
+    def soft_bc_loss(self, params, state: SACNState, batch: Batch, key: jax.Array):
         mean, log_std = self.actor.apply(params, batch["observations"])
         _, log_prob_sampled = sample_tanh_gaussian(key, mean, log_std, self.cfg.tanh_log_det)
         log_prob_data = tanh_gaussian_log_prob(mean, log_std, batch["actions"], log_det=self.cfg.tanh_log_det)
@@ -265,7 +243,7 @@ class EDAC:
         return loss, {"soft_bc_loss": loss, "entropy": -jnp.mean(log_prob_sampled)}
 
     # ------------------------------------------------------------------------------------ update functions
-    def temperature_update(self, state: EDACState, batch: Batch, key: jax.Array, clip: bool = False):
+    def temperature_update(self, state: SACNState, batch: Batch, key: jax.Array, clip: bool = False):
         """One step on the temperature; `clip` (offline RL only, as the authors' code): log alpha to
         +-log_alpha_bound when that is set."""
         _, log_prob = self.sample_policy(state.actor.params, batch["observations"], key)
@@ -280,23 +258,23 @@ class EDAC:
             log_alpha = log_alpha.replace(params=jnp.clip(log_alpha.params, -bound, bound))
         return state.replace(log_alpha=log_alpha), metrics
 
-    def soft_bc_update(self, state: EDACState, batch: Batch, key: jax.Array):
+    def soft_bc_update(self, state: SACNState, batch: Batch, key: jax.Array):
         actor, metrics = gradient_step(state.actor, self.actor_tx, self.soft_bc_loss, state, batch, key)
         return state.replace(actor=actor), metrics
 
-    def actor_update(self, state: EDACState, batch: Batch, key: jax.Array):
+    def actor_update(self, state: SACNState, batch: Batch, key: jax.Array):
         actor, metrics = gradient_step(state.actor, self.actor_tx, self.actor_loss, state, batch, key)
         return state.replace(actor=actor), metrics
 
-    def soft_mc_update(self, state: EDACState, batch: Batch, key: jax.Array):
+    def soft_mc_update(self, state: SACNState, batch: Batch, key: jax.Array):
         critic, metrics = gradient_step(state.critic, self.critic_tx, self.critic_loss, state, batch, key, True)
         return state.replace(critic=polyak(critic, self.cfg.tau)), metrics
 
-    def td_update(self, state: EDACState, batch: Batch, key: jax.Array):
+    def td_update(self, state: SACNState, batch: Batch, key: jax.Array):
         critic, metrics = gradient_step(state.critic, self.critic_tx, self.critic_loss, state, batch, key, False)
         return state.replace(critic=polyak(critic, self.cfg.tau)), metrics
 
-    def rl_update(self, state: EDACState, batch: Batch, key: jax.Array):
+    def rl_update(self, state: SACNState, batch: Batch, key: jax.Array):
         """CORL's order: temperature, actor, critic (+ target), all on one minibatch; with `simultaneous_update`
         (CQL) every loss is computed from the incoming state and the three steps are applied together."""
         temperature = lambda state, batch, key: self.temperature_update(state, batch, key, clip=True)  # noqa: E731
