@@ -14,7 +14,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import NoReturn
 
-from offrl_jax.interrupts import finish, hand_over
+from offrl_jax.interrupts import exit_code, finish, hand_over
 
 
 class UsageError(ValueError):
@@ -204,8 +204,9 @@ def check_xla_flags() -> None:
 
 
 def run_main(main: Callable[[], object]) -> NoReturn:
-    """The `if __name__ == "__main__"` of every command.  Ctrl-C is a KeyboardInterrupt from here on
-    (`offrl_jax.interrupts`); one the command does not handle itself is one line, exit 130, and the process ends at
+    """The `if __name__ == "__main__"` of every command.  Ctrl-C (and SIGTERM) is a KeyboardInterrupt from here on
+    (`offrl_jax.interrupts`); one the command does not handle itself is one line, exit 130 (143 for SIGTERM), and
+    the process ends at
     once (an interpreter shutting down while XLA was compiling could crash).  An XLA_FLAGS that JAX cannot start
     with is one line, exit 2, before the command's work."""
     try:
@@ -218,11 +219,11 @@ def run_main(main: Callable[[], object]) -> NoReturn:
         print("interrupted", file=sys.stderr)
         sys.stdout.flush()
         sys.stderr.flush()
-        os._exit(130)
+        os._exit(exit_code(130))
     except (UsageError, RuntimeError) as e:
         if os.environ.get("OFFRL_JAX_DEBUG") == "1" or not (
                 isinstance(e, UsageError) or "Unable to initialize backend" in str(e)):
             raise
         print_error(e)
         code = 2
-    sys.exit(code if isinstance(code, int) else 0)
+    sys.exit(exit_code(code) if isinstance(code, int) else 0)

@@ -138,6 +138,8 @@ def load(name_or_path, *, max_transitions: int | None = None, clip_actions: bool
     env: the env the data must fit (a file's observation/action dims and action bounds are checked against it).
     """
     name = str(name_or_path)
+    if not name.strip():
+        raise DatasetError(f"{name_or_path!r}: expected a dataset name or path, got an empty string")
     if name.endswith("-v0") and name[:-3] in KNOWN and not (minari_root() / name).is_dir() and not Path(name).exists():
         name = name[:-3]  # the Minari id of a generated dataset (its cache directory's name) is the dataset
     if max_transitions is not None and max_transitions <= 0:

@@ -50,9 +50,32 @@ def normalized_score(env: str, returns: np.ndarray | float) -> np.ndarray | floa
     return 100.0 * (np.asarray(returns) - spec.ref_min_score) / (spec.ref_max_score - spec.ref_min_score)
 
 
+def warn_once_per_message() -> None:
+    """Print each distinct MuJoCo warning once per process (MuJoCo 3.3+ warns on every compile of halfcheetah's
+    deprecated `settotalmass`, once per env an evaluation or a collection makes)."""
+    import sys
+
+    import mujoco
+
+    if getattr(mujoco.get_mju_user_warning(), "offrl_jax", False):
+        return
+    seen: set[str] = set()
+
+    def handler(message) -> None:
+        text = message.decode(errors="replace") if isinstance(message, bytes) else str(message)
+        if text not in seen:
+            seen.add(text)
+            print(f"WARNING: {text} (MuJoCo; shown once)", file=sys.stderr)
+
+    handler.offrl_jax = True
+    mujoco.set_mju_user_warning(handler)
+
+
 def make_env(name: str, **kwargs):
     """A gymnasium env with this project's time limit (the paper's longer limits for Adroit)."""
     import gymnasium as gym
+
+    warn_once_per_message()
 
     spec = get_env_spec(name)
     if spec.adroit:

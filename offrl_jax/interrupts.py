@@ -62,12 +62,15 @@ def _unsafe(frame) -> bool:
 
 
 _pending = False  # a Ctrl-C put off by `during_command` and not raised yet
+_terminated = False  # the interrupt was a SIGTERM (exit 143, not 130)
 
 
 def during_command(signum, frame) -> None:
-    """SIGINT while a command runs: KeyboardInterrupt, or, where it would be lost, the same again in 50 ms (a
-    timer's SIGALRM comes back here: no thread is started inside a callback)."""
-    global _pending
+    """SIGINT (or SIGTERM) while a command runs: KeyboardInterrupt, or, where it would be lost, the same again in
+    50 ms (a timer's SIGALRM comes back here: no thread is started inside a callback)."""
+    global _pending, _terminated
+    if signum == signal.SIGTERM:
+        _terminated = True
     if signum == signal.SIGALRM and not _pending:
         return  # a timer set before `finish` cancelled it
     if _unsafe(frame):
@@ -77,6 +80,11 @@ def during_command(signum, frame) -> None:
         return
     _pending = False
     raise KeyboardInterrupt
+
+
+def exit_code(code: int) -> int:
+    """The exit status for a command that returned `code`: 143 for one that a SIGTERM interrupted (130 otherwise)."""
+    return 143 if code == 130 and _terminated else code
 
 
 def finish() -> bool:
@@ -94,5 +102,7 @@ def hand_over() -> None:
     """From `run_main`: the command's own Ctrl-C handling (`during_command`) replaces `quiet_start`'s."""
     if signal.getsignal(signal.SIGINT) in (_interrupted_while_starting, signal.default_int_handler):
         signal.signal(signal.SIGINT, during_command)
+        if signal.getsignal(signal.SIGTERM) is signal.SIG_DFL:  # `kill`, a scheduler's stop: the same as Ctrl-C
+            signal.signal(signal.SIGTERM, during_command)
     if sys.excepthook is _could_not_start:  # the command reports its own errors from here on
         sys.excepthook = sys.__excepthook__

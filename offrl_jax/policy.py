@@ -25,7 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 from flax import serialization
 
-from offrl_jax.algos import make_algorithm, make_config
+from offrl_jax.algos import make_algorithm, saved_config
 from offrl_jax.envs import get_env_spec
 from offrl_jax.resume import checkpoint_differences, checkpoint_path, kept_updates, shape_mismatch
 from offrl_jax.study import Study
@@ -80,11 +80,21 @@ class Policy:
 
 
 def load_exported(path: str | Path) -> Callable[[np.ndarray], np.ndarray]:
-    """An exported policy as `act(obs (B, obs_dim)) -> actions (B, act_dim)`; needs only JAX."""
+    """An exported policy as `act(obs)`: (B, obs_dim) -> (B, act_dim), or one (obs_dim,) observation -> (act_dim,),
+    as the loaded policy takes them; needs only JAX.  Another shape is refused in one line (ValueError)."""
     from jax import export
 
     exported = export.deserialize(bytearray(Path(path).read_bytes()))
-    return lambda obs: np.asarray(exported.call(jnp.asarray(obs, jnp.float32)))
+    obs_dim = exported.in_avals[0].shape[-1]
+
+    def act(obs) -> np.ndarray:
+        obs = jnp.asarray(obs, jnp.float32)
+        if obs.ndim not in (1, 2) or obs.shape[-1] != obs_dim:
+            raise ValueError(f"observations of shape {tuple(obs.shape)}: expected ({obs_dim},) or (B, {obs_dim})")
+        actions = np.asarray(exported.call(obs[None] if obs.ndim == 1 else obs))
+        return actions[0] if obs.ndim == 1 else actions
+
+    return act
 
 
 def load_policy(run_dir: str | Path, variant: str | None = None, seed: int | None = None,
@@ -122,6 +132,8 @@ def load_policy(run_dir: str | Path, variant: str | None = None, seed: int | Non
     group = next(g for g, _ in groups if variant in [v.label for v in g])
     path = checkpoint_path(run_dir, group if checkpoint != "best" else tuple(v for v in group if v.label == variant),
                            checkpoint)
+    if path.exists() and not path.is_file():
+        raise ValueError(f"{path}: not a checkpoint file (a {'directory' if path.is_dir() else 'special file'})")
     if not path.is_file():
         kept = kept_updates(run_dir, group)
         hint = f"; kept updates: {', '.join(map(str, kept))}" if kept and isinstance(checkpoint, int) else ""
@@ -149,8 +161,7 @@ def load_policy(run_dir: str | Path, variant: str | None = None, seed: int | Non
     spec = get_env_spec(payload.get("env", study.env))
     v = next(v for v in group if v.label == variant)
     resolved = raw.get("resolved", {}).get(variant)  # the run's own values (checked by Study.from_json above)
-    config = make_config(v.algo, study.env, study.dataset, **(
-        {k: tuple(x) if isinstance(x, list) else x for k, x in resolved.items()} if resolved else dict(v.overrides)))
+    config = saved_config(v.algo, resolved) if resolved else study.config(variant)
     states = jax.tree.map(lambda x: np.asarray(x)[member], payload["states"])
     rows = int(np.shape(states["soft_returns"])[0]) if "soft_returns" in states else 1
     algo = make_algorithm(config, spec.obs_dim, spec.act_dim, rows)

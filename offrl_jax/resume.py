@@ -25,7 +25,7 @@ import jax
 import numpy as np
 from flax import serialization
 
-from offrl_jax.algos import make_algorithm, make_config
+from offrl_jax.algos import family_of, make_algorithm
 from offrl_jax.driver import INIT, seed_keys
 from offrl_jax.results import read_curves
 from offrl_jax.study import Study, Variant
@@ -81,7 +81,7 @@ def identity_differences(saved: dict[str, Any], current: dict[str, Any], config_
 
 def state_shapes(study: Study, group: tuple[Variant, ...], obs_dim: int, act_dim: int, rows: int) -> Any:
     """The state-dict of shapes (no arrays are made) that the group's checkpoint must have."""
-    config = make_config(group[0].algo, study.env, study.dataset, **dict(group[0].overrides))
+    config = study.config(group[0].label)
     algo = make_algorithm(config, obs_dim, act_dim, rows)
     members = tuple(s for _ in group for s in study.seeds)
     shapes = jax.eval_shape(jax.vmap(algo.init), seed_keys(members, INIT, 0))
@@ -112,8 +112,21 @@ def checkpoint_differences(payload: dict, study: Study, group: tuple[Variant, ..
     """What differs between a checkpoint's recorded identity and `group` of `study` on the data with this SHA-256
     (None: the data is not compared)."""
     saved = json.loads(payload["identity"])
-    defaults = [json.loads(json.dumps(dataclasses.asdict(type(make_config(v.algo))()), default=list)) for v in group]
+    defaults = [json.loads(json.dumps(dataclasses.asdict(family_of(v.algo).config()), default=list)) for v in group]
     return identity_differences(saved, group_identity(study, group, data_sha256 or saved.get("data")), defaults)
+
+
+def resolved_differences(study: Study, config_path: Path) -> list[str]:
+    """Where the `resolved` section of a run's config.json differs from what `study`'s variants resolve to now
+    ("label.field saved -> now"); a field only one of them has is no difference (it was added or removed since)."""
+    try:
+        saved = json.loads(config_path.read_text()).get("resolved") or {}
+    except (OSError, ValueError, AttributeError):
+        return []  # a config.json that cannot be read was refused when the study was read from it
+    now = json.loads(json.dumps(study.resolved(), default=list))
+    return [f"{label}.{key} {value!r} -> {now[label][key]!r}"
+            for label, values in saved.items() if isinstance(values, dict) and label in now
+            for key, value in values.items() if key in now[label] and value != now[label][key]]
 
 
 def check_resume(study: Study, out_dir: Path, ds, data_sha256: str) -> None:
@@ -135,8 +148,10 @@ def check_resume(study: Study, out_dir: Path, ds, data_sha256: str) -> None:
         if not path.is_file():
             done = [int(r["update"]) for r in rows if r.get("variant") in labels]
             if done:
-                print(f"warning: {path} is missing although curves.csv has evaluations of {', '.join(sorted(labels))} "
-                      f"up to update {max(done)}; they start again from update 0", file=sys.stderr)
+                raise ResumeMismatch(
+                    f"{path} is missing although curves.csv has evaluations of {', '.join(sorted(labels))} up to "
+                    f"update {max(done)}, which resuming would drop; restore the checkpoint, or start a new run "
+                    f"with --config {out_dir / 'config.json'}; nothing was changed")
             continue
         try:
             payload = serialization.msgpack_restore(path.read_bytes())
@@ -162,3 +177,8 @@ def check_resume(study: Study, out_dir: Path, ds, data_sha256: str) -> None:
                    if update < 0 or last_row != update else
                    f"it holds rows of other variants ({', '.join(strangers[:3])})")
             raise ResumeMismatch(f"{path}: does not belong to this run ({why}); nothing was changed")
+    # the checkpoints are this study's: a resolved config that differs from it was edited in config.json
+    if differ := resolved_differences(study, out_dir / "config.json"):
+        raise ResumeMismatch(f"{out_dir / 'config.json'}: its resolved configs are not what its variants give "
+                             f"({'; '.join(differ[:3])}); an edited config.json is refused: start a new run with "
+                             "--config to change a value; nothing was changed")

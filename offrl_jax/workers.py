@@ -219,6 +219,10 @@ def run_in_processes(target: Callable, tasks: list[tuple], parallel: int, bar, r
                 running[index] = (process, receive, cores)
                 try:
                     task_send.send(task)  # Ctrl-C here is seen at once; the worker then reads a closed pipe
+                except BrokenPipeError:  # it died starting up (its imports failed): its stderr says why
+                    process.join(timeout=10)
+                    fail(ChildProcessError(f"a worker process ended before it read its task "
+                                           f"({_exit_text(process.exitcode)}; its error is printed above)"))
                 finally:
                     task_send.close()
             ready = wait([conn for _, conn, _ in running.values()], timeout=1.0)

@@ -121,6 +121,22 @@ def test_kill_and_resume_equals_uninterrupted_run(tmp_path, tiny_hdf5):
     assert (killed / "summary.json").exists() and (killed / "curves.png").exists()
 
 
+def test_sigterm_is_a_stop_with_the_resume_command(tmp_path, tiny_hdf5):
+    """`kill PID` (a scheduler's stop): the same one line as Ctrl-C, with the resume command, and exit 143."""
+    stopped = tmp_path / "stopped"
+    proc = subprocess.Popen([sys.executable, "-m", "experiments.mujoco_medium", "--dataset-path", str(tiny_hdf5),
+                             "--out", str(stopped), "--parallel", "1", *TINY], cwd=ROOT, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True)
+    checkpoint = stopped / "checkpoints" / "pretrained.msgpack"
+    deadline = time.time() + 300
+    while not checkpoint.exists() and time.time() < deadline and proc.poll() is None:
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 143, err
+    assert f"interrupted; resume with --resume {stopped}" in err and "Traceback" not in err
+
+
 def test_ctrl_c_stops_the_worker_processes_and_the_run_resumes(tmp_path, tiny_hdf5):
     """Ctrl-C as a terminal sends it (SIGINT to the whole process group; the two variants train in worker
     processes): the parent tells the workers to stop, exits 130 with the resume command and no traceback, and the

@@ -240,3 +240,12 @@ def test_scratch_folders_of_killed_generations_are_removed(tmp_path):
         d.mkdir()
     _remove_stale_scratch(tmp_path / "hopper-medium-v0")
     assert not dead.exists() and alive.exists() and other.exists()
+
+
+@needs_medium
+def test_generate_into_a_relative_directory(tmp_path, monkeypatch):
+    """`datasets generate NAME --out hm` (a relative path) writes ./hm, as an absolute one does."""
+    monkeypatch.chdir(tmp_path)
+    out = generate("hopper-medium", transitions=1000, out_dir="hm", progress=False, num_envs=2)
+    assert out.resolve() == (tmp_path / "hm").resolve() and (tmp_path / "hm" / "offrl_jax.json").is_file()
+    assert not list(tmp_path.glob(".minari-tmp-*"))

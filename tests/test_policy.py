@@ -46,6 +46,17 @@ def test_the_loaded_policy_scores_what_the_run_evaluated(run, variant):
     assert score == pytest.approx(last_score(run, variant, 1), abs=1e-3)
 
 
+def test_a_checkpoint_path_that_is_a_directory_is_named_as_one(run, tmp_path):
+    import shutil
+
+    copy = Path(shutil.copytree(run, tmp_path / "copy"))
+    target = copy / "checkpoints" / "scratch.msgpack"
+    target.unlink()
+    target.mkdir()
+    with pytest.raises(ValueError, match="not a checkpoint file \\(a directory\\)"):
+        load_policy(copy, "scratch")
+
+
 def test_the_best_checkpoint_is_the_best_evaluation(run):
     rows = [r for r in csv.DictReader((run / "curves.csv").open()) if r["variant"] == "scratch"]
     means = {}
@@ -106,6 +117,9 @@ def test_the_export_acts_like_the_policy_without_training_code(run, tmp_path):
     act = load_exported(path)
     np.testing.assert_allclose(act(obs), policy(obs), rtol=1e-6, atol=1e-6)
     assert act(obs[:1]).shape == (1, 3)  # any batch size
+    np.testing.assert_allclose(act(obs[0]), policy(obs[0]), rtol=1e-6, atol=1e-6)  # one observation, as the policy
+    with pytest.raises(ValueError, match=r"observations of shape \(7, 12\): expected \(11,\) or \(B, 11\)"):
+        act(np.zeros((7, 12)))
 
 
 @pytest.mark.parametrize("args, message", [

@@ -160,6 +160,15 @@ def test_minari_episode_of_length_zero(minari_root, tmp_path):
     assert_one_line(err, path, "episode_6", "length 0")
 
 
+def test_minari_episode_group_with_another_name(minari_root, tmp_path):
+    path = _copy_minari(minari_root, tmp_path)
+    with h5py.File(path / "data/main_data.hdf5", "a") as f:
+        f.create_group("episode_x")
+    with pytest.raises(DatasetError) as err:
+        read_minari(path)
+    assert_one_line(err, path, "'episode_x'", "episode_0, episode_1")
+
+
 def test_minari_without_metadata(minari_root, tmp_path):
     path = _copy_minari(minari_root, tmp_path)
     (path / "data/metadata.json").unlink()

@@ -129,13 +129,29 @@ def test_its_own_checkpoint_resumes_to_the_uninterrupted_run(half_run, whole_run
     assert without_seconds(run / "curves.csv") == without_seconds(whole_run / "curves.csv")
 
 
-def test_a_missing_checkpoint_is_reported_and_the_run_made_again(half_run, whole_run, tmp_path, capsys):
+def test_a_missing_checkpoint_with_evaluations_is_refused(half_run, tmp_path):
+    """Resuming would start that variant again and drop its evaluations: refused, nothing changed."""
     run = resumed_copy(half_run, tmp_path)
     (run / "checkpoints" / "scratch.msgpack").unlink()
-    run_study(tiny_study(), run, synthetic_dataset(), resume=True, progress=False)
-    assert "scratch.msgpack is missing although curves.csv has evaluations of scratch up to update 100; they " \
-           "start again from update 0" in capsys.readouterr().err
-    assert without_seconds(run / "curves.csv") == without_seconds(whole_run / "curves.csv")
+    before = (run / "curves.csv").read_text()
+    with pytest.raises(ResumeMismatch, match="scratch.msgpack is missing although curves.csv has evaluations of "
+                                             "scratch up to update 100, which resuming would drop"):
+        run_study(tiny_study(), run, synthetic_dataset(), resume=True, progress=False)
+    assert (run / "curves.csv").read_text() == before
+
+
+def test_an_edited_resolved_config_is_refused(half_run, tmp_path):
+    """config.json's `resolved` values are what the run trained with: one edited by hand is refused on resume."""
+    import json
+
+    run = resumed_copy(half_run, tmp_path)
+    raw = json.loads((run / "config.json").read_text())
+    label = next(iter(raw["resolved"]))
+    raw["resolved"][label]["gamma"] = 0.95
+    (run / "config.json").write_text(json.dumps(raw))
+    with pytest.raises(ResumeMismatch, match=f"resolved configs are not what its variants give \\({label}.gamma "
+                                             "0.95 -> 0.99"):
+        run_study(tiny_study(), run, synthetic_dataset(), resume=True, progress=False)
 
 
 def test_a_config_field_added_since_is_no_difference_at_its_default():

@@ -287,7 +287,11 @@ def read_minari(path_or_id, env: str | None = None, clip_actions: bool = False) 
     meta = _read_minari_metadata(path, data_dir)
     try:
         with h5py.File(data_dir / "main_data.hdf5", "r") as f:
-            names = sorted((k for k in f.keys() if k.startswith("episode_")), key=lambda k: int(k.split("_")[-1]))
+            names = [k for k in f.keys() if k.startswith("episode_")]
+            if odd := [k for k in names if not k.split("_", 1)[1].isdigit()]:
+                raise DatasetError(f"{path}: data/main_data.hdf5 has a group {odd[0]!r}; Minari names its episode "
+                                   "groups episode_0, episode_1, ...")
+            names.sort(key=lambda k: int(k.split("_", 1)[1]))
             for k in names:
                 if not isinstance(f[k], h5py.Group):
                     raise DatasetError(f"{path}: {k} is not an episode group")

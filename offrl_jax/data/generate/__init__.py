@@ -147,7 +147,7 @@ def write_minari(ds: Dataset, out_dir: Path, info: dict[str, Any], overwrite: bo
     import minari
     from minari.data_collector.episode_buffer import EpisodeBuffer
 
-    out_dir = Path(out_dir)
+    out_dir = Path(out_dir).absolute()  # a relative MINARI_DATASETS_PATH would be taken inside its own folder
     if out_dir.exists() and not overwrite:
         raise FileExistsError(f"{out_dir} exists; pass overwrite=True to replace it")
     spec = get_env_spec(ds.env or ds.name)

@@ -22,7 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from offrl_jax.data.dataset import Dataset
-from offrl_jax.envs import get_env_spec, make_env, normalized_score
+from offrl_jax.envs import get_env_spec, make_env, normalized_score, warn_once_per_message
 from offrl_jax.nets import TanhGaussianActor, sample_tanh_gaussian
 
 ACTOR_HIDDEN = (256, 256)
@@ -100,6 +100,7 @@ def make_gen_env(env_name: str, max_episode_steps: int | None = None):
         return make_env(env_name)
     import gymnasium as gym
 
+    warn_once_per_message()
     return gym.make(get_env_spec(env_name).gym_id, max_episode_steps=max_episode_steps)
 
 
