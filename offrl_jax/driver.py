@@ -37,6 +37,17 @@ from offrl_jax.data.returns import returns_to_go
 from offrl_jax.distributed import to_host
 
 DATA_FIELDS = ("observations", "actions", "rewards", "next_observations", "terminals", "timeouts", "returns")
+# on the device only for an algorithm that reads them (`uses_next_actions`): ReBRAC's critic penalty
+OPTIONAL_FIELDS = ("next_actions",)
+
+
+def next_actions(actions: jax.Array, terminals: jax.Array, timeouts: jax.Array) -> jax.Array:
+    """(T, A) the dataset's action at the next row of the same episode.  The last row of an episode has none: its
+    own action stands in (at a terminal the TD target does not bootstrap, so it is never used; at a time-out it is,
+    unless timeouts="drop" leaves the row out, as CORL's ReBRAC loader does; and at the dataset's last row)."""
+    ends = jnp.maximum(terminals, timeouts).at[-1].set(1.0)
+    following = jnp.concatenate([actions[1:], actions[-1:]])
+    return jnp.where(ends[:, None] > 0, actions, following)
 
 
 def device_data(ds: Dataset, gamma: float, timeout_tail: bool = True) -> tuple[dict[str, jax.Array], tuple]:
@@ -148,7 +159,7 @@ def make_chunk_fn(phase: Phase, batch_size: int, num_calls: int,
             k_idx, k_update = jax.random.split(jax.random.fold_in(key, update))
             idx = jax.random.randint(k_idx, (member_phase.updates_per_call, batch_size), 0, n)
             idx = idx if rows is None else rows[idx]
-            batch = {k: data[k][idx] for k in DATA_FIELDS} | {"idx": idx}
+            batch = {k: data[k][idx] for k in DATA_FIELDS + OPTIONAL_FIELDS if k in data} | {"idx": idx}
             return member_phase.update(state, batch, k_update)
 
         updates = start + member_phase.updates_per_call * jnp.arange(num_calls, dtype=jnp.int32)
@@ -215,6 +226,8 @@ class Driver:
         values = tuple(sweep[1]) if sweep else (None,)
         self.members = tuple(s for _ in values for s in self.seeds)  # value-major: member j * S + i
         self.layout = member_layout(len(self.members), devices, members)  # members: "map"/"vmap" (default: platform)
+        if getattr(algo, "uses_next_actions", False) and "next_actions" not in data:
+            data = data | {"next_actions": next_actions(data["actions"], data["terminals"], data["timeouts"])}
         if getattr(algo.cfg, "timeouts", "bootstrap") == "drop":  # CORL's loader: time-out rows are never sampled
             data = data | {"rows": jnp.asarray(np.flatnonzero(np.asarray(data["timeouts"]) == 0), jnp.int32)}
         self.data = jax.device_put(data, self.layout.replicated)  # one copy per device, shared by its members

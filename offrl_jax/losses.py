@@ -124,6 +124,18 @@ def pretrain_critic_loss(q: jax.Array, mc_return: jax.Array, td_fn: Callable[[],
     return mix_losses(mc_critic_loss(q, mc_return), critic_regression_loss(q, td_fn()), lam, form)
 
 
+def action_penalty(pred_actions: jax.Array, actions: jax.Array) -> jax.Array:
+    """ReBRAC's behaviour penalty per row, ||a~ - a||^2 summed over the action dims.  (B, A), (B, A) -> (B,)."""
+    return jnp.sum((pred_actions - actions) ** 2, axis=-1)
+
+
+def rebrac_next_value(next_q: jax.Array, next_pred_actions: jax.Array, next_actions: jax.Array,
+                      beta: float) -> jax.Array:
+    """ReBRAC's penalised next value min_i Q'_i(s', a~') - beta ||a~' - a'||^2, a~' the target policy's (smoothed)
+    action, a' the dataset's next action.  next_q (N, B), actions (B, A) -> (B,)."""
+    return clipped_double_q(next_q) - beta * action_penalty(next_pred_actions, next_actions)
+
+
 # ---------------------------------------------------------------------------------------------------- actor losses
 
 
@@ -136,6 +148,14 @@ def td3bc_actor_loss(q: jax.Array, pred_actions: jax.Array, actions: jax.Array, 
     """
     lmbda = alpha / (sg(jnp.mean(jnp.abs(q))) + q_scale_eps)
     return -lmbda * jnp.mean(q) + bc_loss(pred_actions, actions)
+
+
+def rebrac_actor_loss(q: jax.Array, pred_actions: jax.Array, actions: jax.Array, beta: float,
+                      normalize_q: bool = True) -> jax.Array:
+    """ReBRAC actor: mean(beta ||pi(s) - a||^2 - lmbda Q(s, pi(s))), lmbda = 1 / sg(mean |Q|) (1 without
+    normalize_q).  q: (B,) (min over the ensemble of the policy action's value), actions: (B, A) -> ()."""
+    lmbda = 1.0 / sg(jnp.mean(jnp.abs(q))) if normalize_q else 1.0
+    return jnp.mean(beta * action_penalty(pred_actions, actions) - lmbda * q)
 
 
 def sac_actor_loss(q: jax.Array, log_prob: jax.Array, alpha: jax.Array) -> jax.Array:

@@ -93,10 +93,11 @@ class DeterministicActor(nn.Module):
     hidden: Sequence[int] = (256, 256)
     layer_norm: bool = True
     arch: Arch = Arch()
+    out_scale: float | None = None  # final layer U(+-out_scale) (ReBRAC: 1e-3); None: the arch's own init
 
     @nn.compact
     def __call__(self, obs: jax.Array) -> jax.Array:
-        return jnp.tanh(MLP(self.hidden, self.act_dim, self.layer_norm, arch=self.arch)(obs))
+        return jnp.tanh(MLP(self.hidden, self.act_dim, self.layer_norm, self.out_scale, self.arch)(obs))
 
 
 class TanhGaussianActor(nn.Module):

@@ -186,3 +186,28 @@ def test_temperature_is_a_constant_in_the_actor_losses():
     lp = jnp.array([0.5, -1.0])
     A(jax.grad(lambda a: L.soft_bc_loss(lp, lp, a))(jnp.array(2.0)), 0.0)
     A(jax.grad(lambda a: L.sac_actor_loss(jnp.ones((2, 2)), lp, a))(jnp.array(2.0)), 0.0)
+
+
+def test_action_penalty_sums_over_action_dims():
+    # rows: (0-1)^2 + (2-0)^2 = 5;  (1-1)^2 + (-1-1)^2 = 4
+    A(L.action_penalty(jnp.array([[0.0, 2.0], [1.0, -1.0]]), jnp.array([[1.0, 0.0], [1.0, 1.0]])), [5.0, 4.0])
+
+
+def test_rebrac_next_value():
+    # critic 0: (1, 0), critic 1: (3, 2) -> min (1, 0); penalties 5 and 4 (above); beta 0.1 -> (1 - 0.5, 0 - 0.4)
+    next_q = jnp.array([[1.0, 0.0], [3.0, 2.0]])  # (N, B)
+    value = L.rebrac_next_value(next_q, jnp.array([[0.0, 2.0], [1.0, -1.0]]), jnp.array([[1.0, 0.0], [1.0, 1.0]]),
+                                0.1)
+    A(value, [0.5, -0.4], rtol=1e-6)
+
+
+def test_rebrac_actor_loss_value_and_gradient():
+    q = jnp.array([2.0, -4.0])  # mean|Q| = 3
+    pi, a = jnp.array([[0.0, 2.0], [1.0, -1.0]]), jnp.array([[1.0, 0.0], [1.0, 1.0]])  # penalties 5, 4
+    # mean(0.1 * (5, 4) - (2, -4) / 3) = mean(0.5 - 2/3, 0.4 + 4/3) = (0.5 + 0.4 + 2/3) / 2
+    A(L.rebrac_actor_loss(q, pi, a, 0.1), (0.9 + 2 / 3) / 2, rtol=1e-6)
+    A(L.rebrac_actor_loss(q, pi, a, 0.1, normalize_q=False), (0.9 + 2.0) / 2, rtol=1e-6)  # lmbda = 1
+    # the scale is a constant: d/dq = -(1/3) / B per row, not also through mean|Q|
+    A(jax.grad(lambda x: L.rebrac_actor_loss(x, pi, a, 0.1))(q), [-1 / 6, -1 / 6], rtol=1e-6)
+    # d/dpi = beta * 2 (pi - a) / B
+    A(jax.grad(lambda p: L.rebrac_actor_loss(q, p, a, 0.1))(pi), 0.1 * 2 * (pi - a) / 2, rtol=1e-6)

@@ -1,8 +1,9 @@
 """The algorithm registry: families, the algorithms made from them, their per-env defaults and their presets.
 
 A family is a config dataclass (extending `offrl_jax.algos.config.Config`) and the algorithm class built from it,
-in a file of its own: `td3bc.py` (a deterministic actor, TD3's critics) and `sacn.py` (a tanh-Gaussian actor, N
-critics, a learned temperature).  An algorithm is a family plus the config values that make it that algorithm:
+in a file of its own: `td3bc.py` (a deterministic actor, TD3's critics), `sacn.py` (a tanh-Gaussian actor, N
+critics, a learned temperature) and `rebrac.py` (TD3 with behaviour penalties in the actor and the critic's
+target).  An algorithm is a family plus the config values that make it that algorithm:
 
     bc          td3bc family, actor pre-training (MSE) for the whole budget
     td3bc       TD3+BC
@@ -11,6 +12,7 @@ critics, a learned temperature).  An algorithm is a family plus the config value
     sacn        SAC-N (eta = 0)
     edac_bc     EDAC + balanced MSE BC term on the actor (the paper's hybrid)
     cql         CQL (CORL form) on the sacn family with twin critics
+    rebrac      ReBRAC (Tarasov et al. 2023)
 
 A new family is its file, one `FAMILIES` line and an `ALGOS` line per algorithm (docs/extending.md).
 """
@@ -22,6 +24,7 @@ from typing import Any
 
 from offrl_jax.algos.common import Phase
 from offrl_jax.algos.config import Config
+from offrl_jax.algos.rebrac import ReBRAC, ReBRACConfig
 from offrl_jax.algos.sacn import SACN, SACNConfig
 from offrl_jax.algos.td3bc import TD3BC, TD3BCConfig
 from offrl_jax.envs import ENVS
@@ -45,6 +48,7 @@ class Algo:
 FAMILIES: dict[str, Family] = {
     "td3bc": Family(TD3BCConfig, TD3BC),
     "sacn": Family(SACNConfig, SACN),
+    "rebrac": Family(ReBRACConfig, ReBRAC),
 }
 
 ALGOS: dict[str, Algo] = {
@@ -57,6 +61,7 @@ ALGOS: dict[str, Algo] = {
     # the authors' CQL configs (CORL): cql_min_q_weight 10, policy_lr 3e-5, no entropy in the backup
     "cql": Algo("sacn", {"num_critics": 2, "eta": 0.0, "cql_alpha": 10.0, "backup_entropy": False,
                          "pretrain": "none", "actor_lr": 3e-5, "simultaneous_update": True}),
+    "rebrac": Algo("rebrac"),
 }
 
 # Presets: named sets of config values, applied after the per-env defaults and before explicit overrides, keyed by
@@ -103,6 +108,10 @@ ENV_DEFAULTS: dict[tuple[str, str], dict[str, Any]] = {
     ("edac", "walker2d"): {"num_critics": 10, "eta": 1.0},
     ("edac", "pen"): {"num_critics": 20, "eta": 1000.0},
     ("edac", "pen:cloned"): {"eta": 10.0},
+    # ReBRAC's published betas for the medium datasets (CORL's configs/offline/rebrac/<env>/medium_v2.yaml)
+    ("rebrac", "hopper"): {"actor_beta": 0.01, "critic_beta": 0.01},
+    ("rebrac", "halfcheetah"): {"actor_beta": 0.001, "critic_beta": 0.01},
+    ("rebrac", "walker2d"): {"actor_beta": 0.05, "critic_beta": 0.1},
 }
 
 
@@ -174,6 +183,7 @@ def make_algorithm(config: Config, obs_dim: int, act_dim: int, num_transitions: 
     raise ValueError(f"{type(config).__name__} is no registered family's config; register it in FAMILIES")
 
 
-__all__ = ["ALGOS", "Algo", "Config", "FAMILIES", "Family", "PRESETS", "Phase", "SACN", "SACNConfig", "TD3BC",
+__all__ = ["ALGOS", "Algo", "Config", "FAMILIES", "Family", "PRESETS", "Phase", "ReBRAC", "ReBRACConfig", "SACN",
+           "SACNConfig", "TD3BC",
            "TD3BCConfig", "env_defaults", "family_of", "make_algorithm", "make_config", "preset_values",
            "saved_config"]

@@ -1,0 +1,160 @@
+"""The ReBRAC family (`rebrac`; Tarasov et al. 2023): TD3 with behaviour penalties in the actor and in the critic's
+target, LayerNorm in the critic, a large batch and 3-layer networks.
+
+    actor   mean(actor_beta ||pi(s) - a||^2 - Q(s, pi(s)) / sg(mean |Q|)),  Q = min over the critics
+    critic  r + gamma (1 - d) (min_i Q'_i(s', a~') - critic_beta ||a~' - a'||^2),  a~' the target actor's smoothed
+            action, a' the dataset's next action (`driver.next_actions`; time-out rows are left out by default, as
+            CORL's loader does, so a bootstrapped target never lacks one)
+
+One critic update per minibatch; every `policy_delay`-th also updates the actor on the same minibatch, after the
+critic, and then both targets (CORL's `rebrac.py` order).
+
+Pre-training (first imitate, then improve), as TD3+BC's: `actor` = BC (MSE, the actor penalty alone), `critic` =
+regression on the Monte-Carlo returns (optionally lambda-mixed with the ReBRAC TD target), `actor+critic` = both at
+once on the same minibatch, targets Polyak-updated throughout.
+"""
+from __future__ import annotations
+
+import dataclasses
+from typing import ClassVar
+
+import jax
+import jax.numpy as jnp
+import optax
+from flax import struct
+
+from offrl_jax import losses as L
+from offrl_jax.algos.common import (
+    Batch,
+    Model,
+    Phase,
+    chain,
+    done_flags,
+    first,
+    gradient_step,
+    new_model,
+    polyak,
+    single,
+    split_budget,
+)
+from offrl_jax.algos.config import Config, require
+from offrl_jax.nets import CriticEnsemble, DeterministicActor
+
+
+@dataclasses.dataclass(frozen=True)
+class ReBRACConfig(Config):
+    actor_lr: float = 1e-3
+    critic_lr: float = 1e-3
+    hidden: tuple[int, ...] = (256, 256, 256)
+    actor_layer_norm: bool = False  # ReBRAC: LayerNorm in the critic only
+    init: str = "torch"
+    timeouts: str = "drop"
+    # ReBRAC's behaviour penalty in the actor loss (per env: hopper 0.01, halfcheetah 0.001, walker2d 0.05)
+    actor_beta: float = 1.0
+    # ReBRAC's behaviour penalty in the critic's target (per env: hopper 0.01, halfcheetah 0.01, walker2d 0.1)
+    critic_beta: float = 1.0
+    policy_noise: float = 0.2  # std of the target policy smoothing noise
+    noise_clip: float = 0.5  # clip of the target policy smoothing noise
+    policy_delay: int = 2  # critic updates per actor and target update (TD3)
+    normalize_q: bool = True  # divide the actor's Q term by sg(mean |Q|)
+    hidden_bias: float | None = 0.1  # constant hidden-layer bias (CORL's ReBRAC, after EDAC); None: the init's own
+    out_init: bool = True  # final layers U(+-1e-3) actor, U(+-3e-3) critics; False: the init scheme's own
+
+    SWEEPABLE: ClassVar[tuple[str, ...]] = ("actor_beta", "critic_beta", "tau", "policy_noise", "noise_clip")
+
+    def __post_init__(self):
+        super().__post_init__()
+        require(self, [
+            ("actor_beta", self.actor_beta >= 0, "must be >= 0"),
+            ("critic_beta", self.critic_beta >= 0, "must be >= 0"),
+            ("policy_delay", self.policy_delay >= 1, "must be >= 1"),
+            ("pretrain_auto_window", not self.pretrain_auto or self.pretrain_auto_window % self.policy_delay == 0,
+             f"must be a multiple of policy_delay ({self.policy_delay})"),
+        ])
+
+
+@struct.dataclass
+class ReBRACState:
+    actor: Model
+    critic: Model
+
+
+class ReBRAC:
+    uses_next_actions = True  # the driver puts the dataset's next actions in every minibatch
+
+    def __init__(self, config: ReBRACConfig, obs_dim: int, act_dim: int, num_transitions: int = 0):
+        self.cfg, self.obs_dim, self.act_dim = config, obs_dim, act_dim
+        arch = config.arch()
+        self.actor = DeterministicActor(act_dim, config.actor_hidden or config.hidden, config.actor_layer_norm, arch,
+                                        1e-3 if config.out_init else None)
+        self.critic = CriticEnsemble(config.num_critics, config.hidden, config.critic_layer_norm,
+                                     out_scale=3e-3 if config.out_init else None, arch=arch)
+        self.actor_tx, self.critic_tx = optax.adam(config.actor_lr), optax.adam(config.critic_lr)
+
+    def init(self, key: jax.Array) -> ReBRACState:
+        k_actor, k_critic = jax.random.split(key)
+        obs, act = jnp.zeros((1, self.obs_dim)), jnp.zeros((1, self.act_dim))
+        return ReBRACState(actor=new_model(self.actor.init(k_actor, obs), self.actor_tx, with_target=True),
+                           critic=new_model(self.critic.init(k_critic, obs, act), self.critic_tx, with_target=True))
+
+    def act(self, state: ReBRACState, obs: jax.Array) -> jax.Array:
+        return self.actor.apply(state.actor.params, obs)
+
+    def phases(self, total_updates: int) -> list[Phase]:
+        cfg = self.cfg
+        pre, rl = split_budget(total_updates, 0 if cfg.pretrain == "none" else cfg.pretrain_updates)
+        update = {"actor": self.bc_update, "critic": self.mc_update,
+                  "actor+critic": chain(self.bc_update, self.mc_update)}.get(cfg.pretrain)
+        monitor = {"actor": ("bc_loss",), "critic": ("mc_error",), "actor+critic": ("bc_loss", "mc_error")}
+        phases = [Phase("pretrain", single(update), pre, auto_stop=cfg.auto_stop(monitor[cfg.pretrain]))] if pre else []
+        rl -= rl % cfg.policy_delay
+        return phases + [Phase("offline_rl", self.rl_update, rl, updates_per_call=cfg.policy_delay)]
+
+    def td_target(self, state: ReBRACState, batch: Batch, key: jax.Array) -> jax.Array:
+        cfg = self.cfg
+        next_obs = batch["next_observations"]
+        next_pi = L.target_policy_smoothing(key, self.actor.apply(state.actor.target, next_obs), cfg.policy_noise,
+                                            cfg.noise_clip)
+        next_q = self.critic.apply(state.critic.target, next_obs, next_pi)
+        next_value = L.rebrac_next_value(next_q, next_pi, batch["next_actions"], cfg.critic_beta)
+        return L.td_target(batch["rewards"], done_flags(batch, cfg.timeouts), next_value, cfg.gamma)
+
+    def critic_loss(self, params, state: ReBRACState, batch: Batch, key: jax.Array, pretraining: bool):
+        q = self.critic.apply(params, batch["observations"], batch["actions"])  # (N, B)
+        td_fn = lambda: self.td_target(state, batch, key)  # noqa: E731
+        if pretraining:
+            loss = L.pretrain_critic_loss(q, batch["returns"], td_fn, self.cfg.lam, self.cfg.lambda_mode)
+        else:
+            loss = L.critic_regression_loss(q, td_fn())
+        return loss, {"critic_loss": loss, "q_mean": jnp.mean(q), "mc_error": jnp.mean((q[0] - batch["returns"]) ** 2)}
+
+    def actor_loss(self, params, state: ReBRACState, batch: Batch):
+        pi = self.actor.apply(params, batch["observations"])
+        q = jnp.min(self.critic.apply(state.critic.params, batch["observations"], pi), axis=0)
+        loss = L.rebrac_actor_loss(q, pi, batch["actions"], self.cfg.actor_beta, self.cfg.normalize_q)
+        return loss, {"actor_loss": loss, "bc_mse": L.bc_loss(pi, batch["actions"])}
+
+    def bc_update(self, state: ReBRACState, batch: Batch, key: jax.Array):
+        def loss_fn(params):
+            loss = L.bc_loss(self.actor.apply(params, batch["observations"]), batch["actions"])
+            return loss, {"bc_loss": loss}
+
+        actor, metrics = gradient_step(state.actor, self.actor_tx, loss_fn)
+        return state.replace(actor=polyak(actor, self.cfg.tau)), metrics
+
+    def mc_update(self, state: ReBRACState, batch: Batch, key: jax.Array):
+        critic, metrics = gradient_step(state.critic, self.critic_tx, self.critic_loss, state, batch, key, True)
+        return state.replace(critic=polyak(critic, self.cfg.tau)), metrics
+
+    def rl_update(self, state: ReBRACState, batches: Batch, key: jax.Array):
+        """The first minibatch: a critic update, then the actor's and both targets'; the others: a critic update."""
+        metrics = {}
+        for i, k in enumerate(jax.random.split(key, self.cfg.policy_delay)):
+            batch = first(batches, i)
+            critic, m = gradient_step(state.critic, self.critic_tx, self.critic_loss, state, batch, k, False)
+            state, metrics = state.replace(critic=critic), metrics | m
+            if i == 0:
+                actor, m = gradient_step(state.actor, self.actor_tx, self.actor_loss, state, batch)
+                tau = self.cfg.tau
+                state, metrics = state.replace(actor=polyak(actor, tau), critic=polyak(state.critic, tau)), metrics | m
+        return state, metrics
