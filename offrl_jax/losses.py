@@ -136,6 +136,13 @@ def rebrac_next_value(next_q: jax.Array, next_pred_actions: jax.Array, next_acti
     return clipped_double_q(next_q) - beta * action_penalty(next_pred_actions, next_actions)
 
 
+def expectile_loss(diff: jax.Array, expectile: float) -> jax.Array:
+    """IQL's asymmetric squared error mean(|expectile - 1(diff < 0)| diff^2), diff = target - prediction: its
+    minimiser is the target's `expectile` (0.5: half the mean squared error, minimised by the mean).  (B,) -> ()."""
+    weight = jnp.where(diff < 0, 1.0 - expectile, expectile)
+    return jnp.mean(weight * diff ** 2)
+
+
 # ---------------------------------------------------------------------------------------------------- actor losses
 
 
@@ -156,6 +163,13 @@ def rebrac_actor_loss(q: jax.Array, pred_actions: jax.Array, actions: jax.Array,
     normalize_q).  q: (B,) (min over the ensemble of the policy action's value), actions: (B, A) -> ()."""
     lmbda = 1.0 / sg(jnp.mean(jnp.abs(q))) if normalize_q else 1.0
     return jnp.mean(beta * action_penalty(pred_actions, actions) - lmbda * q)
+
+
+def awr_actor_loss(neg_log_lik: jax.Array, advantage: jax.Array, beta: float, max_weight: float = 100.0) -> jax.Array:
+    """IQL's advantage-weighted regression: mean(min(exp(beta sg(A)), max_weight) * nll), nll the per-row negative
+    log-likelihood of the dataset action (or its squared error, for a deterministic actor).  (B,), (B,) -> ().
+    beta = 0 weighs every row 1: behaviour cloning."""
+    return jnp.mean(jnp.minimum(jnp.exp(beta * sg(advantage)), max_weight) * neg_log_lik)
 
 
 def sac_actor_loss(q: jax.Array, log_prob: jax.Array, alpha: jax.Array) -> jax.Array:

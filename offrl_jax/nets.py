@@ -153,6 +153,40 @@ def sample_tanh_gaussian(key: jax.Array, mean: jax.Array, log_std: jax.Array,
     return jnp.tanh(u), _log_prob_pre_tanh(mean, log_std, u, log_det)
 
 
+class GaussianActor(nn.Module):
+    """IQL's Gaussian policy: obs (..., obs_dim) -> (mean, log_std), mean = tanh(MLP(obs)) (..., act_dim), log_std a
+    learned state-independent (act_dim,) vector clipped to `log_std_bounds`; it acts with the mean."""
+
+    act_dim: int
+    hidden: Sequence[int] = (256, 256)
+    layer_norm: bool = False
+    arch: Arch = Arch()
+    log_std_bounds: tuple[float, float] = (-20.0, 2.0)
+
+    @nn.compact
+    def __call__(self, obs: jax.Array) -> tuple[jax.Array, jax.Array]:
+        mean = jnp.tanh(MLP(self.hidden, self.act_dim, self.layer_norm, arch=self.arch)(obs))
+        log_std = self.param("log_std", nn.initializers.zeros, (self.act_dim,))
+        return mean, jnp.clip(log_std, *self.log_std_bounds)
+
+
+def gaussian_log_prob(mean: jax.Array, log_std: jax.Array, action: jax.Array) -> jax.Array:
+    """log N(action; mean, exp(log_std)) summed over the action dims.  (..., A), (A,) or (..., A) -> (...,)."""
+    return jnp.sum(-0.5 * ((action - mean) / jnp.exp(log_std)) ** 2 - log_std - 0.5 * jnp.log(2 * jnp.pi), axis=-1)
+
+
+class Value(nn.Module):
+    """V(s): obs (..., obs_dim) -> (...,)."""
+
+    hidden: Sequence[int] = (256, 256)
+    layer_norm: bool = False
+    arch: Arch = Arch()
+
+    @nn.compact
+    def __call__(self, obs: jax.Array) -> jax.Array:
+        return MLP(self.hidden, 1, self.layer_norm, arch=self.arch)(obs)[..., 0]
+
+
 class Critic(nn.Module):
     """Q(s, a): obs (..., obs_dim), act (..., act_dim) -> (...,)."""
 

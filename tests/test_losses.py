@@ -211,3 +211,29 @@ def test_rebrac_actor_loss_value_and_gradient():
     A(jax.grad(lambda x: L.rebrac_actor_loss(x, pi, a, 0.1))(q), [-1 / 6, -1 / 6], rtol=1e-6)
     # d/dpi = beta * 2 (pi - a) / B
     A(jax.grad(lambda p: L.rebrac_actor_loss(q, p, a, 0.1))(pi), 0.1 * 2 * (pi - a) / 2, rtol=1e-6)
+
+
+def test_expectile_loss_is_minimised_at_the_expectile():
+    # targets 1 and 3: the 0.7-expectile v solves 0.7 (3 - v) = 0.3 (v - 1), v = 2.4; the 0.5-expectile is the mean
+    targets = jnp.array([1.0, 3.0])
+    grad = lambda v, e: jax.grad(lambda x: L.expectile_loss(targets - x, e))(v)  # noqa: E731
+    A(grad(2.4, 0.7), 0.0, atol=1e-6)
+    A(grad(2.0, 0.5), 0.0, atol=1e-6)
+    # at v = 2, expectile 0.7: mean(0.3 * 1^2, 0.7 * 1^2) = 0.5; expectile 0.5 is half the MSE
+    A(L.expectile_loss(targets - 2.0, 0.7), 0.5, rtol=1e-6)
+    A(L.expectile_loss(targets - 2.0, 0.5), 0.5 * jnp.mean((targets - 2.0) ** 2), rtol=1e-6)
+
+
+def test_awr_actor_loss_weights_and_clip():
+    # weights exp(2 * (0, 1, 10)) clipped at 100: (1, e^2, 100); nll (1, 2, 3) -> mean(1 + 2 e^2 + 300)
+    nll, adv = jnp.array([1.0, 2.0, 3.0]), jnp.array([0.0, 1.0, 10.0])
+    A(L.awr_actor_loss(nll, adv, 2.0), (1 + 2 * np.exp(2.0) + 300) / 3, rtol=1e-6)
+    A(L.awr_actor_loss(nll, adv, 0.0), 2.0, rtol=1e-6)  # beta = 0: behaviour cloning, every row weighs 1
+    A(jax.grad(lambda a: L.awr_actor_loss(nll, a, 2.0))(adv), 0.0)  # the advantage is a constant
+
+
+def test_gaussian_log_prob():
+    from offrl_jax.nets import gaussian_log_prob
+
+    # N(1; 0, e^0) in each of 2 dims: 2 * (-0.5 - 0.5 log 2 pi)
+    A(gaussian_log_prob(jnp.zeros((1, 2)), jnp.zeros(2), jnp.ones((1, 2))), [-1.0 - np.log(2 * np.pi)], rtol=1e-6)

@@ -2,8 +2,9 @@
 
 A family is a config dataclass (extending `offrl_jax.algos.config.Config`) and the algorithm class built from it,
 in a file of its own: `td3bc.py` (a deterministic actor, TD3's critics), `sacn.py` (a tanh-Gaussian actor, N
-critics, a learned temperature) and `rebrac.py` (TD3 with behaviour penalties in the actor and the critic's
-target).  An algorithm is a family plus the config values that make it that algorithm:
+critics, a learned temperature), `rebrac.py` (TD3 with behaviour penalties in the actor and the critic's
+target) and `iql.py` (implicit Q-learning).  An algorithm is a family plus the config values that make it that
+algorithm:
 
     bc          td3bc family, actor pre-training (MSE) for the whole budget
     td3bc       TD3+BC
@@ -13,6 +14,7 @@ target).  An algorithm is a family plus the config values that make it that algo
     edac_bc     EDAC + balanced MSE BC term on the actor (the paper's hybrid)
     cql         CQL (CORL form) on the sacn family with twin critics
     rebrac      ReBRAC (Tarasov et al. 2023)
+    iql         IQL (Kostrikov et al. 2022)
 
 A new family is its file, one `FAMILIES` line and an `ALGOS` line per algorithm (docs/extending.md).
 """
@@ -24,6 +26,7 @@ from typing import Any
 
 from offrl_jax.algos.common import Phase
 from offrl_jax.algos.config import Config
+from offrl_jax.algos.iql import IQL, IQLConfig
 from offrl_jax.algos.rebrac import ReBRAC, ReBRACConfig
 from offrl_jax.algos.sacn import SACN, SACNConfig
 from offrl_jax.algos.td3bc import TD3BC, TD3BCConfig
@@ -49,6 +52,7 @@ FAMILIES: dict[str, Family] = {
     "td3bc": Family(TD3BCConfig, TD3BC),
     "sacn": Family(SACNConfig, SACN),
     "rebrac": Family(ReBRACConfig, ReBRAC),
+    "iql": Family(IQLConfig, IQL),
 }
 
 ALGOS: dict[str, Algo] = {
@@ -62,6 +66,7 @@ ALGOS: dict[str, Algo] = {
     "cql": Algo("sacn", {"num_critics": 2, "eta": 0.0, "cql_alpha": 10.0, "backup_entropy": False,
                          "pretrain": "none", "actor_lr": 3e-5, "simultaneous_update": True}),
     "rebrac": Algo("rebrac"),
+    "iql": Algo("iql"),
 }
 
 # Presets: named sets of config values, applied after the per-env defaults and before explicit overrides, keyed by
@@ -112,6 +117,9 @@ ENV_DEFAULTS: dict[tuple[str, str], dict[str, Any]] = {
     ("rebrac", "hopper"): {"actor_beta": 0.01, "critic_beta": 0.01},
     ("rebrac", "halfcheetah"): {"actor_beta": 0.001, "critic_beta": 0.01},
     ("rebrac", "walker2d"): {"actor_beta": 0.05, "critic_beta": 0.1},
+    # IQL (CORL's configs/offline/iql/<env>/medium_v2.yaml: expectile 0.7, beta 3 everywhere); hopper's config also
+    # scales rewards by 1000 / (max - min episode return), which this family does not do
+    ("iql", "hopper"): {"deterministic": True, "tau": 0.001},
 }
 
 
@@ -183,7 +191,8 @@ def make_algorithm(config: Config, obs_dim: int, act_dim: int, num_transitions: 
     raise ValueError(f"{type(config).__name__} is no registered family's config; register it in FAMILIES")
 
 
-__all__ = ["ALGOS", "Algo", "Config", "FAMILIES", "Family", "PRESETS", "Phase", "ReBRAC", "ReBRACConfig", "SACN",
+__all__ = ["ALGOS", "Algo", "Config", "FAMILIES", "Family", "IQL", "IQLConfig", "PRESETS", "Phase", "ReBRAC",
+           "ReBRACConfig", "SACN",
            "SACNConfig", "TD3BC",
            "TD3BCConfig", "env_defaults", "family_of", "make_algorithm", "make_config", "preset_values",
            "saved_config"]
