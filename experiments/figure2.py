@@ -1,4 +1,6 @@
-"""Figure 2: hopper, halfcheetah, walker2d medium; TD3+BC and EDAC, each with and without pre-training.
+"""Figure 2: hopper, halfcheetah, walker2d medium; TD3+BC and EDAC, each with and without pre-training (and, beyond
+the paper, ReBRAC and IQL with `--algos rebrac iql`: TD3+BC's budget, ReBRAC at its published batch of 1024 unless
+--batch-size sets another than the default 256).
 
 CPU-sized defaults (the paper runs 1M updates on a GPU), 3 vmapped seeds: TD3+BC 30k updates (10k pre-training),
 evaluation every 2.5k (~25 min per env on 2 cores); EDAC with 10 critics for 16k updates (12k pre-training: 3k soft
@@ -11,6 +13,7 @@ takes ~10 s per 1k updates, critic pre-training ~190-290 s and EDAC ~480 s, so t
 """
 
 from experiments.common import main_guard, positive_int
+from experiments.flags import BATCH_SIZE
 from experiments.mujoco_medium import ENVS, LABELS, make_study, parser, pretrain_variants
 from offrl_jax.study import Variant
 
@@ -30,13 +33,15 @@ def build(args):
     for env in args.envs:
         for algo in args.algos:
             variants, extra = pretrain_variants(algo, args.pretrain, args), {}
-            if algo == "td3bc":  # --num-critics is EDAC's ensemble; TD3+BC keeps its two critics
+            if algo in ("td3bc", "rebrac", "iql"):  # --num-critics is EDAC's ensemble; these keep their two critics
                 variants = tuple(Variant.of(v.label, v.algo, **{k: x for k, x in v.overrides if k != "num_critics"})
                                  for v in variants)
             if algo == "edac":  # 10 critics on a CPU unless --num-critics says otherwise
                 n = args.num_critics or 10
                 variants = tuple(Variant.of(v.label, v.algo, **edac_overrides(dict(v.overrides), n)) for v in variants)
                 extra = {"updates": args.edac_updates, "eval_every": args.edac_eval_every}
+            if algo == "rebrac" and args.batch_size == BATCH_SIZE:  # the flag's default: ReBRAC's own batch
+                extra = {"batch_size": 1024}
             studies.append(make_study(env, algo, args.level, args, extra=extra, variants=variants,
                                       reference=LABELS["none"] if "none" in args.pretrain else None,
                                       name=f"figure2-{env}-{algo}"))
@@ -47,7 +52,8 @@ def make_parser():
     p = parser("experiments.figure2", __doc__, updates=30_000, eval_every=2_500, edac_pretrain=EDAC_PRETRAIN,
                omit=("env", "algo"), num_critics="10, EDAC only")
     p.add_argument("--envs", nargs="+", choices=ENVS, default=list(ENVS))
-    p.add_argument("--algos", nargs="+", choices=("td3bc", "edac"), default=["td3bc", "edac"])
+    p.add_argument("--algos", nargs="+", choices=("td3bc", "edac", "rebrac", "iql"), default=["td3bc", "edac"],
+                   help="(default: td3bc edac, the paper's)")
     p.add_argument("--edac-updates", type=positive_int, default=16_000, help="EDAC's budget (default %(default)s)")
     p.add_argument("--edac-eval-every", type=positive_int, default=1_000,
                    help="EDAC's evaluation interval (default %(default)s); --updates and --eval-every are TD3+BC's")

@@ -165,6 +165,9 @@ def plain_path(text: str) -> Path:
     return Path(text)
 
 
+BATCH_SIZE = 256  # --batch-size's default
+
+
 def seed_count(text: str) -> int:
     """--seeds: a positive integer up to `MAX_MEMBERS` (a variant's seeds are one program, all in memory at once)."""
     value = positive_int(text)
@@ -189,7 +192,7 @@ def run_args(parser: argparse.ArgumentParser, updates: int | None, eval_every: i
                        help="updates between evaluations (default %(default)s)")
     g.add_argument("--eval-episodes", type=positive_int, default=eval_episodes,
                    help="episodes per evaluation per seed (default %(default)s)")
-    g.add_argument("--batch-size", type=positive_int, default=256)
+    g.add_argument("--batch-size", type=positive_int, default=BATCH_SIZE)
     g.add_argument("--checkpoint-every", type=int_at_least(0), default=0,
                    help="updates between checkpoints (0: every evaluation)")
     g.add_argument("--keep-checkpoints", type=int_at_least(0, 2**31 - 1), default=0,

@@ -52,6 +52,16 @@ def test_figure2_and_replay():
         "hopper-medium-replay", "hopper-full-replay"]
 
 
+def test_figure2_beyond_the_paper_rebrac_and_iql():
+    studies = {s.name: s for s in build(figure2, ["--algos", "rebrac", "iql", "--envs", "walker2d"])}
+    rebrac, iql = studies["figure2-walker2d-rebrac"], studies["figure2-walker2d-iql"]
+    assert rebrac.batch_size == 1024 and iql.batch_size == 256  # ReBRAC's published batch unless given
+    assert [v.label for v in rebrac.variants] == ["pretrained", "scratch"] and rebrac.reference == "scratch"
+    assert rebrac.config("pretrained").actor_beta == 0.05 and iql.config("scratch").pretrain == "none"
+    given = build(figure2, ["--algos", "rebrac", "--envs", "hopper", "--batch-size", "512"])
+    assert given[0].batch_size == 512
+
+
 def test_preset_paper():
     studies = build(mujoco_medium, ["--preset", "paper"])
     assert len(studies) == 6 and all(s.updates == 1_000_000 for s in studies)
