@@ -247,6 +247,7 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
     args = parser.parse_args(argv)
     one_line_warnings()
     out, replace, lock, local, ok, code = None, False, None, None, False, 1
+    replaced = None  # where --overwrite keeps the earlier run until the new one has its first checkpoint
     try:
         given = given_dests(parser, argv)
         if args.logger is not None:  # its writer must be there before anything is written
@@ -312,8 +313,10 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
                     check_resume(study, study_out, ds, sha)
             if "updates" in given and isinstance(built, list) and writer:
                 atomic_write_text(out / "config.json", studies_json(built))
-        if replace:
-            shutil.rmtree(out)
+        if replace:  # moved aside, not deleted: a new run that fails before its first checkpoint gives it back
+            replaced = out.with_name(f".{out.name}.replaced")
+            shutil.rmtree(replaced, ignore_errors=True)
+            out.rename(replaced)
         if isinstance(built, list) and args.resume is None and writer:
             out.mkdir(parents=True, exist_ok=True)  # the whole studies, so --resume can start those not begun yet
             atomic_write_text(out / "config.json", studies_json(built))
@@ -341,6 +344,14 @@ def main_guard(build: Callable[[argparse.Namespace], Study | list[Study]], parse
         return code
     finally:
         failed = local.close(ok) if local is not None else None  # the other processes of a --processes run
+        if replaced is not None and replaced.exists():
+            if ok or (out.is_dir() and any(out.rglob("*.msgpack"))):
+                shutil.rmtree(replaced, ignore_errors=True)
+            else:
+                shutil.rmtree(out, ignore_errors=True)
+                replaced.rename(out)
+                print(f"the earlier run in {out} is kept: the new one ended before its first checkpoint",
+                      file=sys.stderr)
         # a claimed timestamped directory that got nothing (the data failed to load) is not left behind,
         # nor its runs/<study>/ when that is empty then (a multi-process run always has --out or --resume)
         if out is not None and args.resume is None and args.out is None and out.is_dir() and not any(out.iterdir()):

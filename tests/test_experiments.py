@@ -97,6 +97,15 @@ def test_overwrite_replaces_an_earlier_run_only_once_the_new_one_can_start(tmp_p
     result = cli("--dataset-path", tmp_path / "missing.hdf5", "--out", out, "--overwrite", *TINY, timeout=120)
     assert result.returncode == 2 and "missing.hdf5" in result.stderr
     assert (out / "summary.json").read_text() == "earlier"  # the data failed to load: nothing deleted
+    # the new run starts and diverges before its first checkpoint: the earlier run is given back as it was
+    result = cli("--dataset-path", tiny_hdf5, "--out", out, "--overwrite", *TINY, "--critic-lr", "1e30",
+                 timeout=300)
+    assert result.returncode != 0 and "the earlier run in" in result.stderr, result.stderr
+    assert (out / "summary.json").read_text() == "earlier" and not (out.parent / ".run.replaced").exists()
+    # a new run that trains replaces it
+    result = cli("--dataset-path", tiny_hdf5, "--out", out, "--overwrite", *TINY, timeout=300)
+    assert result.returncode == 0, result.stderr
+    assert (out / "summary.json").read_text() != "earlier" and not (out.parent / ".run.replaced").exists()
 
 
 def test_kill_and_resume_equals_uninterrupted_run(tmp_path, tiny_hdf5):
