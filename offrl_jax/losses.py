@@ -1,12 +1,14 @@
 """Every loss and target as a small pure function of arrays (jit-able, no networks, no hidden state).
 
 Shapes: B = batch, A = action dim, N = ensemble size, M = sampled actions per state.  Q-values of an ensemble are
-(N, B).  Each loss returns a scalar; targets return (B,).  `sg` = `jax.lax.stop_gradient`.
+(N, B).  Each loss returns a scalar; targets return (B,).  `sg` = `jax.lax.stop_gradient`.  The shapes are asserted
+(chex) where a wrong one would broadcast silently: they fail when the function is traced, naming the argument.
 """
 from __future__ import annotations
 
 from collections.abc import Callable
 
+import chex
 import jax
 import jax.numpy as jnp
 
@@ -17,6 +19,7 @@ sg = jax.lax.stop_gradient
 
 def bc_loss(pred_actions: jax.Array, actions: jax.Array) -> jax.Array:
     """Behaviour cloning, MSE over every element.  pred_actions, actions: (B, A) -> ()."""
+    chex.assert_equal_shape([pred_actions, actions])
     return jnp.mean((pred_actions - actions) ** 2)
 
 
@@ -31,6 +34,8 @@ def soft_bc_loss(log_prob_sampled: jax.Array, log_prob_data: jax.Array, alpha: j
 
 def mc_critic_loss(q: jax.Array, returns: jax.Array) -> jax.Array:
     """Monte-Carlo value error: sum over critics of the batch-mean squared error.  q: (N, B), returns: (B,) -> ()."""
+    chex.assert_rank([q, returns], [2, 1])
+    chex.assert_equal_shape_suffix([q, returns], 1)
     return jnp.sum(jnp.mean((q - returns[None]) ** 2, axis=-1))
 
 
@@ -126,6 +131,8 @@ def pretrain_critic_loss(q: jax.Array, mc_return: jax.Array, td_fn: Callable[[],
 
 def action_penalty(pred_actions: jax.Array, actions: jax.Array) -> jax.Array:
     """ReBRAC's behaviour penalty per row, ||a~ - a||^2 summed over the action dims.  (B, A), (B, A) -> (B,)."""
+    chex.assert_rank(pred_actions, 2)
+    chex.assert_equal_shape([pred_actions, actions])
     return jnp.sum((pred_actions - actions) ** 2, axis=-1)
 
 
@@ -133,12 +140,15 @@ def rebrac_next_value(next_q: jax.Array, next_pred_actions: jax.Array, next_acti
                       beta: float) -> jax.Array:
     """ReBRAC's penalised next value min_i Q'_i(s', a~') - beta ||a~' - a'||^2, a~' the target policy's (smoothed)
     action, a' the dataset's next action.  next_q (N, B), actions (B, A) -> (B,)."""
+    chex.assert_rank(next_q, 2)
+    chex.assert_equal_shape_prefix([next_q[0], next_pred_actions], 1)
     return clipped_double_q(next_q) - beta * action_penalty(next_pred_actions, next_actions)
 
 
 def expectile_loss(diff: jax.Array, expectile: float) -> jax.Array:
     """IQL's asymmetric squared error mean(|expectile - 1(diff < 0)| diff^2), diff = target - prediction: its
     minimiser is the target's `expectile` (0.5: half the mean squared error, minimised by the mean).  (B,) -> ()."""
+    chex.assert_rank(diff, 1)
     weight = jnp.where(diff < 0, 1.0 - expectile, expectile)
     return jnp.mean(weight * diff ** 2)
 
@@ -153,6 +163,8 @@ def td3bc_actor_loss(q: jax.Array, pred_actions: jax.Array, actions: jax.Array, 
     q: (B,) (the first critic's value of the policy action), pred_actions, actions: (B, A) -> ().  CORL and the
     authors divide by mean|Q| alone (q_scale_eps = 0).
     """
+    chex.assert_rank(q, 1)
+    chex.assert_equal_shape_prefix([q, pred_actions], 1)
     lmbda = alpha / (sg(jnp.mean(jnp.abs(q))) + q_scale_eps)
     return -lmbda * jnp.mean(q) + bc_loss(pred_actions, actions)
 
@@ -161,6 +173,8 @@ def rebrac_actor_loss(q: jax.Array, pred_actions: jax.Array, actions: jax.Array,
                       normalize_q: bool = True) -> jax.Array:
     """ReBRAC actor: mean(beta ||pi(s) - a||^2 - lmbda Q(s, pi(s))), lmbda = 1 / sg(mean |Q|) (1 without
     normalize_q).  q: (B,) (min over the ensemble of the policy action's value), actions: (B, A) -> ()."""
+    chex.assert_rank(q, 1)
+    chex.assert_equal_shape_prefix([q, pred_actions], 1)
     lmbda = 1.0 / sg(jnp.mean(jnp.abs(q))) if normalize_q else 1.0
     return jnp.mean(beta * action_penalty(pred_actions, actions) - lmbda * q)
 
@@ -169,6 +183,8 @@ def awr_actor_loss(neg_log_lik: jax.Array, advantage: jax.Array, beta: float, ma
     """IQL's advantage-weighted regression: mean(min(exp(beta sg(A)), max_weight) * nll), nll the per-row negative
     log-likelihood of the dataset action (or its squared error, for a deterministic actor).  (B,), (B,) -> ().
     beta = 0 weighs every row 1: behaviour cloning."""
+    chex.assert_rank(neg_log_lik, 1)
+    chex.assert_equal_shape([neg_log_lik, advantage])
     return jnp.mean(jnp.minimum(jnp.exp(beta * sg(advantage)), max_weight) * neg_log_lik)
 
 

@@ -237,3 +237,17 @@ def test_gaussian_log_prob():
 
     # N(1; 0, e^0) in each of 2 dims: 2 * (-0.5 - 0.5 log 2 pi)
     A(gaussian_log_prob(jnp.zeros((1, 2)), jnp.zeros(2), jnp.ones((1, 2))), [-1.0 - np.log(2 * np.pi)], rtol=1e-6)
+
+
+@pytest.mark.parametrize("call", [
+    lambda: L.mc_critic_loss(jnp.zeros((2, 5)), jnp.zeros((5, 1))),  # returns (B, 1) would broadcast to (2, 5, 5)
+    lambda: L.td3bc_actor_loss(jnp.zeros((2, 5)), jnp.zeros((5, 3)), jnp.zeros((5, 3)), 2.5),  # all critics' Q
+    lambda: L.bc_loss(jnp.zeros((5, 3)), jnp.zeros((5, 1))),
+    lambda: L.awr_actor_loss(jnp.zeros(5), jnp.zeros((5, 1)), 3.0),
+    lambda: L.rebrac_actor_loss(jnp.zeros(4), jnp.zeros((5, 3)), jnp.zeros((5, 3)), 0.1),
+])
+def test_a_wrong_shape_fails_when_traced(call):
+    with pytest.raises(AssertionError):
+        call()
+    with pytest.raises(AssertionError):
+        jax.jit(lambda: call())()
