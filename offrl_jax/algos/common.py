@@ -138,6 +138,19 @@ def single(update: UpdateFn) -> UpdateFn:
     return lambda state, batch, key: update(state, first(batch), key)
 
 
+def joint_pretraining(cfg: Any, bc_update: UpdateFn, mc_update: UpdateFn, total: int) -> tuple[list[Phase], int]:
+    """(the pre-training phase, the updates left for offline RL) of a family that pre-trains its actor by BC and its
+    critic on MC returns in one phase: `cfg.pretrain` "actor", "critic" or "actor+critic" (both on each minibatch),
+    `cfg.pretrain_updates` long (it ends itself with `cfg.pretrain_auto`, watching the losses it trains); no phase for
+    "none"."""
+    pre, rl = split_budget(total, 0 if cfg.pretrain == "none" else cfg.pretrain_updates)
+    if not pre:
+        return [], rl
+    update = {"actor": bc_update, "critic": mc_update, "actor+critic": chain(bc_update, mc_update)}[cfg.pretrain]
+    monitor = {"actor": ("bc_loss",), "critic": ("mc_error",), "actor+critic": ("bc_loss", "mc_error")}[cfg.pretrain]
+    return [Phase("pretrain", single(update), pre, auto_stop=cfg.auto_stop(monitor))], rl
+
+
 def split_budget(total: int, pretrain: int) -> tuple[int, int]:
     """(pre-training updates, RL updates): pre-training counts inside the total budget."""
     if pretrain > total:

@@ -28,13 +28,12 @@ from offrl_jax.algos.common import (
     Batch,
     Model,
     Phase,
-    chain,
     done_flags,
     gradient_step,
+    joint_pretraining,
     new_model,
     polyak,
     single,
-    split_budget,
 )
 from offrl_jax.algos.config import Config, require
 from offrl_jax.nets import CriticEnsemble, DeterministicActor, GaussianActor, Value, gaussian_log_prob
@@ -99,12 +98,7 @@ class IQL:
         return out if self.cfg.deterministic else out[0]
 
     def phases(self, total_updates: int) -> list[Phase]:
-        cfg = self.cfg
-        pre, rl = split_budget(total_updates, 0 if cfg.pretrain == "none" else cfg.pretrain_updates)
-        update = {"actor": self.bc_update, "critic": self.mc_update,
-                  "actor+critic": chain(self.bc_update, self.mc_update)}.get(cfg.pretrain)
-        monitor = {"actor": ("bc_loss",), "critic": ("mc_error",), "actor+critic": ("bc_loss", "mc_error")}
-        phases = [Phase("pretrain", single(update), pre, auto_stop=cfg.auto_stop(monitor[cfg.pretrain]))] if pre else []
+        phases, rl = joint_pretraining(self.cfg, self.bc_update, self.mc_update, total_updates)
         return phases + [Phase("offline_rl", single(self.rl_update), rl)]
 
     def neg_log_lik(self, params, batch: Batch) -> jax.Array:

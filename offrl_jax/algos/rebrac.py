@@ -28,14 +28,12 @@ from offrl_jax.algos.common import (
     Batch,
     Model,
     Phase,
-    chain,
     done_flags,
     first,
     gradient_step,
+    joint_pretraining,
     new_model,
     polyak,
-    single,
-    split_budget,
 )
 from offrl_jax.algos.config import Config, require
 from offrl_jax.nets import CriticEnsemble, DeterministicActor
@@ -102,11 +100,7 @@ class ReBRAC:
 
     def phases(self, total_updates: int) -> list[Phase]:
         cfg = self.cfg
-        pre, rl = split_budget(total_updates, 0 if cfg.pretrain == "none" else cfg.pretrain_updates)
-        update = {"actor": self.bc_update, "critic": self.mc_update,
-                  "actor+critic": chain(self.bc_update, self.mc_update)}.get(cfg.pretrain)
-        monitor = {"actor": ("bc_loss",), "critic": ("mc_error",), "actor+critic": ("bc_loss", "mc_error")}
-        phases = [Phase("pretrain", single(update), pre, auto_stop=cfg.auto_stop(monitor[cfg.pretrain]))] if pre else []
+        phases, rl = joint_pretraining(cfg, self.bc_update, self.mc_update, total_updates)
         rl -= rl % cfg.policy_delay
         return phases + [Phase("offline_rl", self.rl_update, rl, updates_per_call=cfg.policy_delay)]
 

@@ -23,15 +23,14 @@ from offrl_jax.algos.common import (
     Batch,
     Model,
     Phase,
-    chain,
     done_flags,
     first,
     gradient_step,
+    joint_pretraining,
     new_model,
     polyak,
     repeat_obs,
     single,
-    split_budget,
     uniform_actions,
 )
 from offrl_jax.algos.config import Config, check_cql_fields
@@ -108,16 +107,7 @@ class TD3BC:
         cfg = self.cfg
         if cfg.bc_only:
             return [Phase("actor_pretrain", single(self.bc_update), total_updates)]
-        pre_updates = 0 if cfg.pretrain == "none" else cfg.pretrain_updates
-        pre, rl = split_budget(total_updates, pre_updates)
-        pretrain_fn = {
-            "actor": self.bc_update,
-            "critic": self.mc_update,
-            "actor+critic": chain(self.bc_update, self.mc_update),
-        }.get(cfg.pretrain)
-        monitor = {"actor": ("bc_loss",), "critic": ("mc_error",), "actor+critic": ("bc_loss", "mc_error")}
-        auto = cfg.auto_stop(monitor.get(cfg.pretrain, ()))
-        phases = [Phase("pretrain", single(pretrain_fn), pre, auto_stop=auto)] if pre else []
+        phases, rl = joint_pretraining(cfg, self.bc_update, self.mc_update, total_updates)
         rl -= rl % cfg.policy_delay
         return phases + [Phase("offline_rl", self.rl_update, rl, updates_per_call=cfg.policy_delay)]
 
