@@ -50,14 +50,16 @@ def next_actions(actions: jax.Array, terminals: jax.Array, timeouts: jax.Array) 
     return jnp.where(ends[:, None] > 0, actions, following)
 
 
-def device_data(ds: Dataset, gamma: float, timeout_tail: bool = True) -> tuple[dict[str, jax.Array], tuple]:
-    """Normalised observations + Monte-Carlo returns-to-go on the device (once, shared by every seed)."""
+def device_data(ds: Dataset, gamma: float, timeout_tail: bool = True,
+                normalize_reward: bool = False) -> tuple[dict[str, jax.Array], tuple]:
+    """Normalised observations + Monte-Carlo returns-to-go on the device (once, shared by every seed); with
+    `normalize_reward` the rewards (and so the returns) are scaled by `Dataset.reward_scale`."""
     mean, std = ds.obs_stats()
     data = {
         "observations": normalize_obs(ds.observations, mean, std),
         "next_observations": normalize_obs(ds.next_observations, mean, std),
         "actions": ds.actions,
-        "rewards": ds.rewards,
+        "rewards": ds.rewards * ds.reward_scale() if normalize_reward else ds.rewards,
         "terminals": ds.terminals,
         "timeouts": ds.timeouts,
     }

@@ -194,7 +194,7 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
     first_variant, labels, seeds = group[0], [v.label for v in group], study.seeds
     config = study.config(first_variant.label)
     algo = make_algorithm(config, ds.obs_dim, ds.act_dim, len(ds))
-    data, (obs_mean, obs_std) = device_data(ds, config.gamma)
+    data, (obs_mean, obs_std) = device_data(ds, config.gamma, normalize_reward=config.normalize_reward)
     sweep = (swept, tuple(float(dict(v.overrides)[swept]) for v in group)) if swept else None
     driver = Driver(algo, data, seeds, study.batch_size, sweep=sweep)
     policy = make_policy(algo.act, obs_mean, obs_std)

@@ -56,6 +56,22 @@ def test_edac_soft_pretraining_computes_per_seed_soft_returns(tiny_dataset):
     assert "diversity" in chunks[1].metrics and "mc_error" in chunks[1].metrics
 
 
+def test_normalized_rewards_give_episode_returns_a_range_of_1000():
+    from offrl_jax.data.dataset import Dataset
+    # two episodes (a terminal at row 1, the dataset's end at row 4) with returns 1 + 3 = 4 and 2 + 2 + 2 = 6
+    rewards = np.array([1, 3, 2, 2, 2], np.float32)
+    terminals = np.array([0, 1, 0, 0, 0], np.float32)
+    obs = np.zeros((5, 1), np.float32)
+    ds = Dataset(obs, np.zeros((5, 1), np.float32), rewards, obs, terminals, np.zeros(5, np.float32), env="hopper")
+    assert ds.reward_scale() == 1000 / (6 - 4) == 500
+    assert ds.select(slice(2, 5)).reward_scale() == 1.0  # one return: nothing to spread
+    plain, _ = device_data(ds, 0.5)
+    scaled, _ = device_data(ds, 0.5, normalize_reward=True)
+    np.testing.assert_allclose(np.asarray(scaled["rewards"]), 500 * rewards)
+    np.testing.assert_allclose(np.asarray(scaled["returns"]), 500 * np.asarray(plain["returns"]), rtol=1e-6)
+    np.testing.assert_allclose(np.asarray(plain["returns"])[:2], [1 + 0.5 * 3, 3])
+
+
 @pytest.mark.parametrize("algo_name, name, values, kw", [
     ("td3bc", "alpha", (1.0, 10.0), dict(pretrain="actor+critic", pretrain_updates=100, hidden=(32, 32))),
     pytest.param("edac", "eta", (0.0, 5.0), dict(pretrain="actor+critic", pretrain_updates=100, num_critics=3,

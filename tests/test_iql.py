@@ -22,7 +22,9 @@ def test_published_defaults_and_one_line_checks():
     cfg = make_config("iql", "halfcheetah")
     assert (cfg.expectile, cfg.beta, cfg.tau, cfg.deterministic) == (0.7, 3.0, 0.005, False)
     assert cfg.hidden == (256, 256) and not cfg.actor_layer_norm and not cfg.critic_layer_norm
-    assert make_config("iql", "hopper").deterministic and make_config("iql", "hopper").tau == 0.001
+    hopper = make_config("iql", "hopper")
+    assert hopper.deterministic and hopper.tau == 0.001 and hopper.normalize_reward  # CORL's hopper config
+    assert not cfg.normalize_reward and not make_config("iql", "walker2d").normalize_reward
     with pytest.raises(ValueError, match="IQLConfig.expectile = 1.0 must be in"):
         make_config("iql", "hopper", expectile=1.0)
 

@@ -117,9 +117,9 @@ ENV_DEFAULTS: dict[tuple[str, str], dict[str, Any]] = {
     ("rebrac", "hopper"): {"actor_beta": 0.01, "critic_beta": 0.01},
     ("rebrac", "halfcheetah"): {"actor_beta": 0.001, "critic_beta": 0.01},
     ("rebrac", "walker2d"): {"actor_beta": 0.05, "critic_beta": 0.1},
-    # IQL (CORL's configs/offline/iql/<env>/medium_v2.yaml: expectile 0.7, beta 3 everywhere); hopper's config also
-    # scales rewards by 1000 / (max - min episode return), which this family does not do
-    ("iql", "hopper"): {"deterministic": True, "tau": 0.001},
+    # IQL (CORL's configs/offline/iql/<env>/medium_v2.yaml: expectile 0.7, beta 3 everywhere); hopper's also scales
+    # the rewards by 1000 / (max - min episode return)
+    ("iql", "hopper"): {"deterministic": True, "tau": 0.001, "normalize_reward": True},
 }
 
 

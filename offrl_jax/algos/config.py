@@ -43,6 +43,9 @@ class Config:
     init: str = "flax"  # flax (lecun-normal, zero bias), torch (nn.Linear's default) or orthogonal
     num_critics: int = 2  # critic ensemble size
     timeouts: str = "bootstrap"  # TD target at a time-out: bootstrap, stop (the authors'), drop the row (CORL's)
+    # rewards x 1000 / (max - min episode return) of the dataset before any target or return is computed (CORL's
+    # IQL on hopper); evaluation scores are the environment's own
+    normalize_reward: bool = False
     # pre-training (first imitate, then improve): which networks, and for how many of the run's updates
     pretrain: PretrainMode = "actor+critic"
     pretrain_updates: int = 10_000

@@ -62,6 +62,13 @@ class Dataset:
         """(E,) undiscounted return of every episode."""
         return np.bincount(self.episode_ids, weights=self.rewards).astype(np.float64)
 
+    def reward_scale(self, steps: int = 1000) -> float:
+        """`steps` / (max - min episode return): the factor that gives the dataset's episode returns a range of
+        `steps` (CORL's reward normalisation for MuJoCo; 1 when every episode has the same return)."""
+        returns = self.episode_returns()
+        spread = float(returns.max() - returns.min()) if returns.size else 0.0
+        return steps / spread if spread > 0 else 1.0
+
     def obs_stats(self) -> tuple[np.ndarray, np.ndarray]:
         """Mean and std (+1e-3) of the observations, for state normalisation (applied identically at evaluation)."""
         mean = self.observations.mean(0).astype(np.float32)
