@@ -12,9 +12,9 @@ scores and the paper's re-computed random scores (Jelley et al., Table 4) all us
 
   * door-human's recorded rewards equal the original reward read off the next recorded observation up to the
     velocity cost (residual in [-0.023, -2e-5], mean |.| 0.001); with the installed sign the mean |error| is 0.027.
-  * on the same simulated states, installed - original = 0.2 * ||palm - handle|| to 4e-15 (`replay_door_demos`;
-    open-loop replay of the demonstrations itself drifts: their first observations differ from the recorded
-    initial states by up to 0.5 in the arm joints).
+  * on the same simulated states, installed - original = 0.2 * ||palm - handle|| to 4e-15 (tests/test_door_cloned.py;
+    an open-loop replay of the demonstrations drifts: their first observations differ from the recorded initial
+    states by up to 0.5 in the arm joints).
   * 100 uniform-random episodes (paper time limits, the seeds of experiments.adroit_random_scores): door -84.65 +-
     0.10 (paper -84.52; installed reward -68.75), hammer -857.21 +- 1.57 (-856.83; -833.45), relocate -39.10 +- 3.87
     (-37.95; +48.59).
@@ -28,8 +28,6 @@ an option with this stack: it requires numpy<1.24, its envs do not register thro
 MuJoCo 4 rejects its XML (`apirate` attribute).
 """
 from __future__ import annotations
-
-from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -134,38 +132,3 @@ def with_original_reward(env: gym.Env) -> gym.Env:
             return env
         inner = inner.env
     return OriginalAdroitReward(env)
-
-
-def replay_door_demos(path: str | Path, episodes: int | None = None) -> dict:
-    """Replay the human door demonstrations (`door-human-demos.npz`) open-loop from their recorded initial states.
-
-    Returns per-step arrays over all replayed steps: `obs_err` (max |obs - recorded obs| per step, comparing the
-    observation *before* each recorded action), `reward_installed`, `reward_original`, `reward_recorded` and `dist`
-    (||palm - handle|| after the step).
-    """
-    from offrl_jax.envs import make_env
-
-    with np.load(path) as f:
-        d = {k: f[k] for k in f.files}
-    lengths = d["episode_lengths"]
-    starts = np.concatenate([[0], np.cumsum(lengths)[:-1]])
-    env = OriginalAdroitReward(make_env("door", disable_env_checker=True))
-    unwrapped = env.unwrapped
-    out = {k: [] for k in ("obs_err", "reward_installed", "reward_original", "reward_recorded", "dist", "episode")}
-    n = len(lengths) if episodes is None else min(episodes, len(lengths))
-    for ep in range(n):
-        env.reset(seed=ep)
-        unwrapped.set_env_state({"qpos": d["init_qpos"][ep], "qvel": d["init_qvel"][ep],
-                                 "door_body_pos": d["init_door_body_pos"][ep]})
-        obs = unwrapped._get_obs()
-        for t in range(starts[ep], starts[ep] + lengths[ep]):
-            out["obs_err"].append(np.max(np.abs(obs - d["observations"][t])))
-            obs, r, _, _, info = env.step(d["actions"][t])
-            out["reward_original"].append(r)
-            out["reward_installed"].append(info["installed_reward"])
-            out["reward_recorded"].append(d["rewards"][t])
-            out["dist"].append(np.linalg.norm(unwrapped.data.site_xpos[env._ids.grasp]
-                                              - unwrapped.data.site_xpos[env._ids.handle]))
-            out["episode"].append(ep)
-    env.close()
-    return {k: np.asarray(v) for k, v in out.items()}

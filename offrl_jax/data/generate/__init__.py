@@ -236,13 +236,14 @@ def check_replaceable(out: Path) -> None:
 
 def generate(name: str, transitions: int | None = None, out_dir: str | Path | None = None, seed: int = 0,
              overwrite: bool = False, progress: bool = True, num_envs: int = 16,
-             sac_run: str | Path | None = None) -> Path:
+             sac_run: str | Path | None = None, demos: Dataset | None = None) -> Path:
     """Generate dataset `name` (e.g. "hopper-medium") and write it with minari; returns its directory.
 
     transitions: cap on the number of rows (default 1M per policy; the replay levels default to the whole run).
     out_dir: the dataset directory (default `dataset_dir(name)`: `cache_dir()/"datasets"/<name>-v0`); an existing
         one raises unless overwrite, which replaces only a dataset directory written here (`check_replaceable`).
     seed: env / action-noise seed of the rollouts.  sac_run: SAC run directory for the replay levels.
+    demos: the human demonstrations door-cloned is made from (`offrl_jax.datasets.load("door-human")`).
     """
     target = Path(out_dir) if out_dir is not None else default_dir(name)
     if overwrite and target.exists():
@@ -250,7 +251,9 @@ def generate(name: str, transitions: int | None = None, out_dir: str | Path | No
     if name == "door-cloned":
         from offrl_jax.data.generate.door_cloned import generate_door_cloned
 
-        return generate_door_cloned(transitions, out_dir, seed, overwrite=overwrite, progress=progress)
+        if demos is None:
+            raise ValueError("door-cloned is made from the door-human demonstrations: pass demos=")
+        return generate_door_cloned(demos, transitions, out_dir, seed, overwrite=overwrite, progress=progress)
     env, level = parse_name(name)
     out = Path(out_dir) if out_dir is not None else default_dir(name)
     if out.exists() and not overwrite:

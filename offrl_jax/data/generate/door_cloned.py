@@ -1,8 +1,12 @@
 """door-cloned: D4RL's recipe for Adroit "cloned" datasets, on gymnasium-robotics' AdroitHandDoor-v1.
 
     from offrl_jax.data.generate.door_cloned import generate_door_cloned
-    path = generate_door_cloned()                                  # 1M rows -> cache_dir()/"datasets"/"door-cloned"
-    path = generate_door_cloned(transitions=4000, out_dir="/tmp/dc")
+    demos = offrl_jax.datasets.load("door-human")
+    path = generate_door_cloned(demos)                             # 1M rows -> cache_dir()/"datasets"/"door-cloned"
+    path = generate_door_cloned(demos, transitions=4000, out_dir="/tmp/dc")
+
+The demonstrations come in as an argument (the catalogue, `offrl_jax.datasets`, loads them), so this generator does
+not call back into the catalogue.
 
 D4RL (scripts/generation/hand_dapg_policies.py + hand_dapg_combined.py): an MLP policy behaviour-cloned on the 25
 human demonstrations is rolled out with Gaussian action noise (mjrl's `get_action(obs)[0]`, actions clipped to
@@ -11,7 +15,7 @@ first episode end at or after N/2, followed by the human demonstrations tiled (`
 Here:
 
   * BC = this library's `bc` (TD3BC family, actor-only MSE pre-training; `make_config("bc", "door")`), trained with
-    `Driver` on `datasets.load("door-human")` for `bc_updates` updates; its deterministic tanh actor on normalised
+    `Driver` on the demonstrations for `bc_updates` updates; its deterministic tanh actor on normalised
     observations is the mean, and rollouts add N(0, noise_std^2) noise per action dimension, then clip to [-1, 1].
   * Rollouts use `make_env("door")` (the paper's 300-step limit; D4RL used the v0 env's 200) with the *original*
     D4RL reward (`offrl_jax.adroit.OriginalAdroitReward`), so both halves share the demonstrations' reward function.
@@ -161,15 +165,13 @@ def tile_demos(demos: Dataset, n: int) -> dict[str, np.ndarray]:
     return arrays
 
 
-def build_door_cloned(transitions: int = DEFAULT_TRANSITIONS, seed: int = 0, bc_updates: int = DEFAULT_BC_UPDATES,
-                      noise_std: float = DEFAULT_NOISE_STD, num_envs: int = 16,
+def build_door_cloned(demos: Dataset, transitions: int = DEFAULT_TRANSITIONS, seed: int = 0,
+                      bc_updates: int = DEFAULT_BC_UPDATES, noise_std: float = DEFAULT_NOISE_STD, num_envs: int = 16,
                       progress: bool = True) -> tuple[Dataset, dict[str, Any]]:
-    """The in-memory door-cloned dataset and its provenance (no writing); see the module docstring."""
-    from offrl_jax.datasets import door_human_path, load
-
+    """The in-memory door-cloned dataset from the human demonstrations `demos`, and its provenance (no writing); see
+    the module docstring."""
     if transitions < 2:
         raise ValueError(f"transitions = {transitions}: need at least 2 (one rollout row and one demonstration row)")
-    demos = load("door-human")
     act, bc_info = train_bc(demos, bc_updates, seed, progress=progress)
     tic = time.time()
     roll, roll_stats = rollout(act, transitions // 2, transitions - 1, seed, noise_std, num_envs, progress)
@@ -182,7 +184,7 @@ def build_door_cloned(transitions: int = DEFAULT_TRANSITIONS, seed: int = 0, bc_
         "recipe": "D4RL hand_dapg_combined: BC rollouts (first half, whole episodes) ++ human demos tiled",
         "bc": {k: v for k, v in bc_info.items() if k != "actor_variables"},
         "rollouts": roll_stats,
-        "demos": {"path": str(door_human_path()), "episodes": int(demos.episode_ends.sum()),
+        "demos": {"path": demos.source, "episodes": int(demos.episode_ends.sum()),
                   "transitions": len(demos), "rows_used": int(n_demo),
                   "repeats": round(n_demo / len(demos), 2)},
         "reward": "original D4RL reward (offrl_jax.adroit.OriginalAdroitReward), as the demonstrations' rewards",
@@ -191,11 +193,12 @@ def build_door_cloned(transitions: int = DEFAULT_TRANSITIONS, seed: int = 0, bc_
     return ds, source
 
 
-def generate_door_cloned(transitions: int | None = None, out_dir: str | Path | None = None,
+def generate_door_cloned(demos: Dataset, transitions: int | None = None, out_dir: str | Path | None = None,
                          seed: int = 0, *, overwrite: bool = False, progress: bool = True,
                          bc_updates: int = DEFAULT_BC_UPDATES, noise_std: float = DEFAULT_NOISE_STD,
                          num_envs: int = 16) -> Path:
-    """Generate door-cloned (`transitions` rows, half BC rollouts, half demonstrations) in Minari format; returns its
+    """Generate door-cloned from the human demonstrations `demos` (`transitions` rows, half BC rollouts, half
+    demonstrations) in Minari format; returns its
     directory (default `dataset_dir("door-cloned")`; an existing one raises unless overwrite)."""
     import flax.serialization
 
@@ -208,7 +211,7 @@ def generate_door_cloned(transitions: int | None = None, out_dir: str | Path | N
     if out.exists() and not overwrite:
         raise FileExistsError(f"{out} exists; pass overwrite=True to replace it")
     t0 = time.time()
-    ds, source = build_door_cloned(transitions, seed, bc_updates, noise_std, num_envs, progress)
+    ds, source = build_door_cloned(demos, transitions, seed, bc_updates, noise_std, num_envs, progress)
     actor_vars = source.pop("_actor_variables")
     spec = get_env_spec("door")
     half = source["rollouts"]["transitions"]
