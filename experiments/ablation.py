@@ -6,9 +6,10 @@ variant, evaluation every 2.5k (4 variants: ~40 min on 2 cores).  The paper: 1M 
     python -m experiments.ablation [--env walker2d] [--algo edac] [--updates N]
 """
 
-from experiments.common import UsageError, main_guard
-from experiments.mujoco_medium import PRETRAIN, make_study, parser, pretrain_variants
 from offrl_jax.algos import ALGOS
+from offrl_jax.app.command import run_command
+from offrl_jax.app.studies import PRETRAIN, make_study, parser, pretrain_variants
+from offrl_jax.cli import UsageError
 
 
 def build(args):
@@ -25,7 +26,7 @@ def make_parser():
 
 
 def main(argv=None) -> int:
-    return main_guard(build, make_parser(), argv)
+    return run_command(build, make_parser(), argv)
 
 
 if __name__ == "__main__":

@@ -14,10 +14,11 @@ paper's 0.1 (Table 3) under any preset; the authors' door config has 1.0 (`--alp
 """
 import argparse
 
-from experiments.common import OneLineParser, main_guard, positive_int, study_fields
-from experiments.flags import run_args
 from offrl_jax.algos import PRESETS, preset_values
-from offrl_jax.cli import number
+from offrl_jax.app.command import run_command
+from offrl_jax.app.flags import run_args
+from offrl_jax.app.studies import study_fields
+from offrl_jax.cli import OneLineParser, number, positive_int
 from offrl_jax.study import Study, Variant
 
 # label -> (algorithm, pre-training)
@@ -71,7 +72,7 @@ def make_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
-    return main_guard(build, make_parser(), argv)
+    return run_command(build, make_parser(), argv)
 
 
 if __name__ == "__main__":

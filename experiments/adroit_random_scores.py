@@ -18,9 +18,9 @@ from pathlib import Path
 import numpy as np
 from tqdm.auto import tqdm
 
-from experiments.common import OneLineParser, refuse_existing
+from offrl_jax.app.outputs import refuse_existing
 from offrl_jax.checkpoint import atomic_write_text
-from offrl_jax.cli import check_writable_dir, int_at_least, seed_int
+from offrl_jax.cli import OneLineParser, check_writable_dir, int_at_least, seed_int
 from offrl_jax.envs import ENVS, make_env
 
 OUTPUTS = ("scores.json", "table.txt")  # what --out gets (--overwrite replaces only these)

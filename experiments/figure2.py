@@ -12,9 +12,10 @@ takes ~10 s per 1k updates, critic pre-training ~190-290 s and EDAC ~480 s, so t
     python -m experiments.figure2 [--envs hopper] [--algos td3bc] [--edac-updates 50000] [--seeds 2]
 """
 
-from experiments.common import main_guard, positive_int
-from experiments.flags import BATCH_SIZE
-from experiments.mujoco_medium import ENVS, LABELS, make_study, parser, pretrain_variants
+from offrl_jax.app.command import run_command
+from offrl_jax.app.flags import BATCH_SIZE
+from offrl_jax.app.studies import ENVS, LABELS, make_study, parser, pretrain_variants
+from offrl_jax.cli import positive_int
 from offrl_jax.study import Variant
 
 # Unless given on the command line: 3k soft BC + 9k soft-return critic updates.  The critic starts near 0 (EDAC's
@@ -61,7 +62,7 @@ def make_parser():
 
 
 def main(argv=None) -> int:
-    return main_guard(build, make_parser(), argv)
+    return run_command(build, make_parser(), argv)
 
 
 if __name__ == "__main__":

@@ -8,8 +8,8 @@ mixing.
     python -m experiments.lambda_sweep [--env hopper] [--lambdas 0 0.1 0.5 1] [--lambda-mode target]
 """
 
-from experiments.common import main_guard
-from experiments.mujoco_medium import given, make_study, parser, sweep_variants
+from offrl_jax.app.command import run_command
+from offrl_jax.app.studies import given, make_study, parser, sweep_variants
 
 
 def build(args):
@@ -30,7 +30,7 @@ def make_parser():
 
 
 def main(argv=None) -> int:
-    return main_guard(build, make_parser(), argv)
+    return run_command(build, make_parser(), argv)
 
 
 if __name__ == "__main__":

@@ -6,8 +6,8 @@ variant, evaluation every 2k (8 runs in all: ~1 hour on 2 cores; pass --env to r
     python -m experiments.layernorm [--env hopper] [--updates N]
 """
 
-from experiments.common import main_guard
-from experiments.mujoco_medium import given, make_study, parser, sweep_variants
+from offrl_jax.app.command import run_command
+from offrl_jax.app.studies import given, make_study, parser, sweep_variants
 
 COMBOS = {"LN actor+critic": (True, True), "LN actor only": (True, False), "LN critic only": (False, True),
           "no LN": (False, False)}
@@ -32,7 +32,7 @@ def make_parser():
 
 
 def main(argv=None) -> int:
-    return main_guard(build, make_parser(), argv)
+    return run_command(build, make_parser(), argv)
 
 
 if __name__ == "__main__":

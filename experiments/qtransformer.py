@@ -7,8 +7,8 @@ evaluation every 2k (~30 min on one core).  The paper: 1M updates.
     python -m experiments.qtransformer [--env walker2d] [--updates N]
 """
 
-from experiments.common import main_guard
-from experiments.mujoco_medium import given, make_study, parser, sweep_variants
+from offrl_jax.app.command import run_command
+from offrl_jax.app.studies import given, make_study, parser, sweep_variants
 
 
 def build(args):
@@ -25,7 +25,7 @@ def make_parser():
 
 
 def main(argv=None) -> int:
-    return main_guard(build, make_parser(), argv)
+    return run_command(build, make_parser(), argv)
 
 
 if __name__ == "__main__":

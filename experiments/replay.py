@@ -9,8 +9,8 @@ from the cache (or trains it first: hours on a CPU).
     python -m experiments.replay [--env walker2d] [--levels medium-replay full-replay]
 """
 
-from experiments.common import main_guard
-from experiments.mujoco_medium import make_study, parser
+from offrl_jax.app.command import run_command
+from offrl_jax.app.studies import make_study, parser
 
 
 def build(args):
@@ -27,7 +27,7 @@ def make_parser():
 
 
 def main(argv=None) -> int:
-    return main_guard(build, make_parser(), argv)
+    return run_command(build, make_parser(), argv)
 
 
 if __name__ == "__main__":

@@ -36,9 +36,8 @@ import sys
 from collections import defaultdict
 from pathlib import Path
 
-from experiments.common import OneLineParser
 from offrl_jax.aggregate import aggregate, aggregate_table, arms, claims_table, plot_aggregate
-from offrl_jax.cli import check_writable_dir, check_writable_file, print_error
+from offrl_jax.cli import OneLineParser, check_writable_dir, check_writable_file, print_error
 from offrl_jax.figures import behaviour_score, plot_studies
 from offrl_jax.results import check_curve_seeds, read_curves, short_curves
 from offrl_jax.study import Study

@@ -15,7 +15,7 @@ import json
 
 import numpy as np
 
-from experiments.common import OneLineParser
+from offrl_jax.cli import OneLineParser
 from offrl_jax.data.returns import returns_to_go
 
 RIGHT, LEFT = "->", "<-"

@@ -18,9 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.common import OneLineParser, refuse_existing
+from offrl_jax.app.outputs import refuse_existing
 from offrl_jax.checkpoint import atomic_write_bytes, atomic_write_text
-from offrl_jax.cli import check_writable_dir, int_at_least, number, positive_int, seed_int
+from offrl_jax.cli import OneLineParser, check_writable_dir, int_at_least, number, positive_int, seed_int
 
 OUTPUTS = ("rows.json", "summary.json", "theory.png")  # what --out gets (--overwrite replaces only these)
 

@@ -85,7 +85,8 @@ def test_generate_door_cloned_tiny(tmp_path):
     n = 1000
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        out = generate_door_cloned(load("door-human"), n, tmp_path / "door-cloned", seed=0, progress=False, bc_updates=50)
+        out = generate_door_cloned(load("door-human"), n, tmp_path / "door-cloned", seed=0, progress=False,
+                                   bc_updates=50)
         ds = read_minari(out, env="door")
         demos = read_door_npz(door_human_path())
     info = json.loads((out / "offrl_jax.json").read_text())

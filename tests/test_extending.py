@@ -44,9 +44,9 @@ def test_hyper_parameter_example_is_a_flag_with_its_comment_as_help(doc_namespac
 def test_every_config_field_has_a_flag():
     import dataclasses
 
-    from experiments.flags import NOT_FLAGS
     from experiments.mujoco_medium import make_parser
     from offrl_jax.algos import FAMILIES
+    from offrl_jax.app.flags import NOT_FLAGS
 
     dests = {a.dest for a in make_parser()._actions}
     for cls in (family.config for family in FAMILIES.values()):

@@ -176,7 +176,7 @@ def test_authors_preset_values_and_precedence():
     assert make_config("cql", "door", preset="authors").alpha_lr == 3e-5
     with pytest.raises(ValueError, match="unknown preset"):
         make_config("td3bc", "hopper", preset="nope")
-    assert set(PRESETS) == {"authors"}
+    assert set(PRESETS) == {"authors", "published"}
 
 
 def test_authors_preset_from_the_command_line():

@@ -29,7 +29,7 @@ def test_a_process_started_from_one_with_the_flags_set_gets_its_own_count_not_bo
 @pytest.mark.skipif(not hasattr(os, "sched_getaffinity") or len(os.sched_getaffinity(0)) < 2,
                     reason="needs 2 cores")
 def test_the_command_line_gives_a_process_a_device_per_core():
-    code = ("from experiments.launch import use_cpu_cores; use_cpu_cores(); import jax; "
+    code = ("from offrl_jax.app.launch import use_cpu_cores; use_cpu_cores(); import jax; "
             "print(jax.device_count(), jax.devices()[0].platform)")
     env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", USER_XLA_FLAGS)} | {"JAX_PLATFORMS": "cpu"}
     out = subprocess.run(["taskset", "-c", "0,1", sys.executable, "-c", code], env=env, capture_output=True,

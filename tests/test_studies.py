@@ -4,7 +4,7 @@ import json
 import pytest
 
 from experiments import ablation, adroit_door, figure2, lambda_sweep, layernorm, mujoco_medium, qtransformer, replay
-from experiments.common import UsageError
+from offrl_jax.cli import UsageError
 
 
 def build(module, argv):
@@ -88,6 +88,18 @@ def test_only_the_main_job_has_the_paper_preset(capsys):
     assert e.value.code == 2 and "invalid choice: 'paper'" in capsys.readouterr().err
 
 
+def test_the_main_job_declares_its_default_preset():
+    (default,) = build(mujoco_medium, [])
+    assert all(dict(v.overrides)["alpha"] == 2.5 for v in default.variants)  # the "published" preset
+    assert "alpha" not in dict(build(mujoco_medium, ["--preset", "authors"])[0].variants[0].overrides)  # per env
+    assert all(dict(v.overrides)["alpha"] == 7.0 for v in build(mujoco_medium, ["--alpha", "7"])[0].variants)
+    assert "alpha" not in dict(build(mujoco_medium, ["--algo", "edac"])[0].variants[0].overrides)  # TD3+BC's only
+    args = mujoco_medium.make_parser().parse_args([])
+    assert args.preset is None and mujoco_medium.given(args) == {}  # not a parsed flag: --config replays nothing
+    with pytest.raises(UsageError, match="one config preset at a time"):
+        build(mujoco_medium, ["--preset", "authors", "published"])
+
+
 def test_preset_paper_refuses_the_flags_it_sets():
     with pytest.raises(UsageError, match="--preset paper sets --env, --updates itself"):
         build(mujoco_medium, ["--preset", "paper", "--env", "walker2d", "--updates", "1000"])
@@ -113,7 +125,7 @@ def test_alpha_sweep_builds_one_variant_per_value_and_groups_them():
 
 
 def test_a_multi_study_run_saves_every_study_for_resume(tmp_path):
-    from experiments.common import saved_studies, studies_json
+    from offrl_jax.app.outputs import saved_studies, studies_json
 
     studies = build(figure2, ["--envs", "hopper", "walker2d", "--algos", "td3bc", "--alpha", "1", "2.5"])
     (tmp_path / "config.json").write_text(studies_json(studies))  # what a new run writes before its first study
@@ -129,7 +141,7 @@ def test_a_multi_study_run_saves_every_study_for_resume(tmp_path):
 def test_runs_started_in_the_same_second_get_their_own_directories(tmp_path, monkeypatch):
     import argparse
 
-    from experiments.common import output_dir
+    from offrl_jax.app.outputs import output_dir
 
     monkeypatch.chdir(tmp_path)
     monkeypatch.setattr("time.strftime", lambda fmt: "20260101-000000")
@@ -141,7 +153,7 @@ def test_runs_started_in_the_same_second_get_their_own_directories(tmp_path, mon
 def test_an_old_multi_study_config_resumes_the_studies_begun_and_names_the_others(tmp_path, capsys):
     import json
 
-    from experiments.common import saved_studies
+    from offrl_jax.app.outputs import saved_studies
 
     hopper, walker = build(figure2, ["--envs", "hopper", "walker2d", "--algos", "td3bc"])
     (tmp_path / "config.json").write_text(json.dumps({"studies": [hopper.name, walker.name]}))  # the old format
@@ -227,7 +239,7 @@ def test_a_config_json_whose_records_have_the_wrong_shape_is_not_a_saved_study(f
 def test_an_old_multi_study_config_refuses_a_name_outside_its_run(tmp_path, name):
     import json
 
-    from experiments.common import saved_studies
+    from offrl_jax.app.outputs import saved_studies
 
     (tmp_path / "config.json").write_text(json.dumps({"studies": [name]}))  # the old format: names only
     with pytest.raises(UsageError, match="a study's name"):

@@ -1,7 +1,7 @@
 """The hyper-parameters every algorithm family shares (`Config`), and the checks that give a bad value one line.
 
 A family's config is a frozen dataclass that extends `Config` with its own fields (`TD3BCConfig`, `SACNConfig`) and
-may give a shared field its own default.  Each field's comment is its `--help` text (`experiments/flags.py`).
+may give a shared field its own default.  Each field's comment is its `--help` text (`offrl_jax/app/flags.py`).
 Construction checks every field against its annotation (`check_types`, which also stores JSON's forms as the
 annotation says, so a config read back from config.json equals the one written), then every value (`require`).
 """

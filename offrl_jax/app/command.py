@@ -1,0 +1,303 @@
+"""What `python -m experiments.<name>` does, as named steps: `run_command(build, parser, argv)`.
+
+    1. read the command      flags checked; the study (or studies) built, replayed from --config, or read back for
+                             --resume
+    2. start the processes   this process's CPU cores, a multi-process run's others (`offrl_jax.app.launch`)
+    3. claim the output      the run directory chosen (`offrl_jax.app.outputs`), checked writable and locked
+    4. load the data         every dataset once, before anything is written; bad data fails here
+    5. check a resume        every checkpoint belongs to its study, data and settings (`offrl_jax.resume`)
+    6. run                   each study into its directory (`offrl_jax.runner.run_study`), its table printed
+    7. clean up              an --overwrite'd earlier run deleted, or given back if the new one has no checkpoint
+                             yet; a claimed directory that got nothing removed; the lock released
+
+Expected failures (bad flags, bad data, an unwritable place, divergence) print one line, `error: ...`, and exit 2
+(3 for divergence); `OFFRL_JAX_DEBUG=1` re-raises them with the traceback instead.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import importlib.util
+import os
+import shutil
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+from offrl_jax import datasets
+from offrl_jax.app.launch import check_backend, start_local_processes, start_processes, use_cpu_cores
+from offrl_jax.app.outputs import output_dir, saved_studies, studies_json
+from offrl_jax.checkpoint import atomic_write_text
+from offrl_jax.cli import UsageError, check_writable_dir, lock_run_dir, one_line_warnings, print_error
+from offrl_jax.data.dataset import DatasetError
+from offrl_jax.provenance import fingerprint
+from offrl_jax.resume import check_resume
+from offrl_jax.runner import Diverged, run_study
+from offrl_jax.study import Study, Variant
+from offrl_jax.summary import print_table
+
+Build = Callable[[argparse.Namespace], "Study | list[Study]"]
+
+_UNSET = object()
+PROCESS_FLAGS = frozenset({"processes", "distributed", "coordinator", "num_processes", "process_id"})
+RESUME_FLAGS = frozenset({"resume", "updates", "parallel", "no_progress", "clip_actions", "logger", *PROCESS_FLAGS})
+# run flag destination -> the Study field it sets (seeds and --dataset-path are mapped in `replay`)
+RUN_FIELDS = ("updates", "eval_every", "eval_episodes", "batch_size", "checkpoint_every", "keep_checkpoints",
+              "max_transitions", "clip_actions")
+REPLAY_FLAGS = frozenset({"config", "out", "overwrite", "parallel", "no_progress", "logger", "seeds", "seed_offset",
+                          "dataset_path", *RUN_FIELDS, *PROCESS_FLAGS})
+
+
+def given_dests(parser: argparse.ArgumentParser, argv=None) -> set[str]:
+    """The destinations of the flags typed on the command line (typed with their default value too)."""
+    probe = argparse.Namespace(**{a.dest: _UNSET for a in parser._actions if a.dest != argparse.SUPPRESS})
+    parser.parse_args(sys.argv[1:] if argv is None else argv, probe)
+    return {dest for dest, value in vars(probe).items() if value is not _UNSET}
+
+
+def _flags(parser: argparse.ArgumentParser, dests) -> str:
+    names = {a.dest: a.option_strings[0] for a in parser._actions if a.option_strings}
+    return ", ".join(names.get(d, d) for d in sorted(dests))
+
+
+def extend(saved: Study | list[Study], updates: int) -> Study | list[Study]:
+    """The saved study (or studies) with a larger budget: --resume --updates N continues a run past its end."""
+    studies = saved if isinstance(saved, list) else [saved]
+    if any(updates < s.updates for s in studies):
+        raise UsageError(f"--updates {updates:,} is less than the saved run's {max(s.updates for s in studies):,}; "
+                         "a resumed run can be extended, not shortened")
+    longer = [dataclasses.replace(s, updates=updates) for s in studies]
+    return longer if isinstance(saved, list) else longer[0]
+
+
+def replay(saved: Study | list[Study], args, given: set[str], hparams: dict) -> Study | list[Study]:
+    """The saved study (or studies) with the run flags in `given` and the hyper-parameters `hparams` replaced."""
+    swept = sorted(k for k, v in hparams.items() if isinstance(v, list))  # `config_values`: a sweep is a list
+    if swept:
+        raise UsageError(f"--config takes one value per hyper-parameter (got several for {', '.join(swept)}); "
+                         "start a new run to sweep")
+    fields = {f: getattr(args, f) for f in RUN_FIELDS if f in given}
+    if given & {"seeds", "seed_offset"}:
+        fields["seeds"] = tuple(range(args.seed_offset, args.seed_offset + args.seeds))
+    if "dataset_path" in given:
+        fields["dataset"] = str(args.dataset_path)
+
+    def one(study: Study) -> Study:
+        variants = tuple(Variant.of(v.label, v.algo, **(dict(v.overrides) | hparams)) for v in study.variants)
+        return dataclasses.replace(study, variants=variants, **fields)
+
+    return [one(s) for s in saved] if isinstance(saved, list) else one(saved)
+
+
+def load_data(study: Study, clip_actions: bool = False):
+    """The study's dataset (`clip_actions`: also clip, for a resumed run saved before studies recorded it)."""
+    clip = study.clip_actions or clip_actions or None
+    ds = datasets.load(study.dataset, max_transitions=study.max_transitions, clip_actions=clip, env=study.env)
+    if ds.env is not None and ds.env != study.env:
+        raise UsageError(f"{study.dataset}: dataset is for env '{ds.env}', not '{study.env}'")
+    return ds
+
+
+def _data_key(study: Study) -> tuple:
+    return study.dataset, study.env, study.max_transitions, study.clip_actions
+
+
+@dataclasses.dataclass
+class Command:
+    """One command's state across its steps (see the module): what it was asked, where it writes, what it holds."""
+    args: argparse.Namespace
+    parser: argparse.ArgumentParser
+    argv: list[str] | None
+    given: set[str] = dataclasses.field(default_factory=set)
+    built: Study | list[Study] | None = None
+    out: Path | None = None
+    replace: bool = False  # --overwrite: an earlier run in `out` is to be replaced
+    replaced: Path | None = None  # where that earlier run waits until the new one has its first checkpoint
+    lock: object = None
+    local: object = None  # the other processes of a --processes run
+    writer: bool = True  # this process writes the run (process 0 of a multi-process run)
+
+    @property
+    def resuming(self) -> bool:
+        return self.args.resume is not None
+
+    @property
+    def studies(self) -> list[Study]:
+        return self.built if isinstance(self.built, list) else [self.built]
+
+    def study_dir(self, study: Study) -> Path:
+        return self.out / study.name if isinstance(self.built, list) else self.out
+
+    # 1. read the command
+    def read(self, build: Build, hparams: Callable[[argparse.Namespace], dict] | None,
+             hparam_dests: frozenset[str]) -> None:
+        args, parser = self.args, self.parser
+        self.given = given = given_dests(parser, self.argv)
+        if args.logger is not None:  # its writer must be there before anything is written
+            module = {"tensorboard": "tensorboardX", "wandb": "wandb"}[args.logger]
+            if importlib.util.find_spec(module) is None:
+                raise UsageError(f"--logger {args.logger} needs {module}: pip install -e \".[{args.logger}]\"")
+        if self.resuming and args.config is not None:
+            raise UsageError("--resume and --config exclude each other: --resume continues a run in place, "
+                             "--config starts a new one from its settings")
+        if self.resuming and not (args.resume / "config.json").is_file():
+            raise UsageError(f"{args.resume}: nothing to resume (no config.json)")
+        if self.resuming and given - RESUME_FLAGS:
+            raise UsageError(f"--resume continues {args.resume} with its saved settings, so "
+                             f"{_flags(parser, given - RESUME_FLAGS)} cannot change (only --updates, to extend it); "
+                             f"to change settings start a new run with --config {args.resume}")
+        if args.config is not None:
+            if not args.config.exists():
+                raise UsageError(f"{args.config}: no such file or directory")
+            if args.config.is_dir() and not (args.config / "config.json").is_file():
+                raise UsageError(f"{args.config or '.'}: a directory without a config.json (give a run directory "
+                                 "or its config.json)")
+            unknown = given - REPLAY_FLAGS - hparam_dests
+            if unknown:
+                raise UsageError(f"--config keeps the saved run's variants, so {_flags(parser, unknown)} cannot be "
+                                 "given with it")
+            typed = {k: v for k, v in hparams(args).items() if v is not None} if hparams else {}
+            path = args.config / "config.json" if args.config.is_dir() else args.config
+            self.built = replay(saved_studies(path.parent, path), args, given, typed)
+        elif not self.resuming:
+            self.built = build(args)  # validates every hyper-parameter and budget
+
+    # 2. start the processes
+    def start_processes(self) -> None:
+        use_cpu_cores()
+        self.writer = start_processes(self.args)
+        if self.args.processes <= 1:  # a --processes run starts its backend once the others are started
+            check_backend()
+
+    # 3. claim the output (and, for --resume, read back what it holds)
+    def claim_output(self) -> None:
+        args = self.args
+        if self.writer:
+            self.out, self.replace = output_dir(args, self.parser.prog.split(".")[-1])
+            check_writable_dir(self.out)  # before any data is loaded or generated
+            self.lock = lock_run_dir(self.out)  # held until the end: one writer per run directory
+        else:  # another process of this run writes (and checks) the directory
+            self.out = args.resume or args.out
+        if self.resuming:
+            self.built = saved_studies(self.out)
+            if "updates" in self.given:
+                self.built = extend(self.built, args.updates)
+        self.local = start_local_processes(args, self.argv, self.parser.prog, self.out)
+
+    # 4. load the data
+    def load(self) -> list:
+        loaded: dict = {}  # each dataset once
+        for study in self.studies:
+            if _data_key(study) not in loaded:
+                loaded[_data_key(study)] = load_data(study, self.args.clip_actions)
+        data = [loaded[_data_key(s)] for s in self.studies]
+        for study, ds in zip(self.studies, data):
+            if study.batch_size > len(ds):
+                raise UsageError(f"--batch-size {study.batch_size} is larger than the dataset ({len(ds):,} "
+                                 f"transitions of {study.dataset})")
+        return data
+
+    # 5. check a resume: every study's checkpoints must be its own, before anything is written
+    def check_resume(self, data: list, shas: list[str]) -> None:
+        if not self.resuming:
+            return
+        for study, ds, sha in zip(self.studies, data, shas):
+            if self.study_dir(study).is_dir():  # a study of a multi-study run not begun yet has none
+                check_resume(study, self.study_dir(study), ds, sha)
+        if "updates" in self.given and isinstance(self.built, list) and self.writer:
+            atomic_write_text(self.out / "config.json", studies_json(self.built))
+
+    # 6. run
+    def run(self, data: list, shas: list[str]) -> None:
+        if self.replace:  # moved aside, not deleted: a new run that fails before its first checkpoint gives it back
+            self.replaced = self.out.with_name(f".{self.out.name}.replaced")
+            shutil.rmtree(self.replaced, ignore_errors=True)
+            self.out.rename(self.replaced)
+        if isinstance(self.built, list) and not self.resuming and self.writer:
+            self.out.mkdir(parents=True, exist_ok=True)  # the whole studies, so --resume can start those not begun
+            atomic_write_text(self.out / "config.json", studies_json(self.built))
+        args = self.args
+        for study, ds, sha in zip(self.studies, data, shas):
+            where = self.study_dir(study)
+            if self.writer:
+                print(f"{study.name}: {len(ds):,} transitions of {study.dataset}; writing to {where}", file=sys.stderr)
+            summary = run_study(study, where, ds, resume=self.resuming, progress=not args.no_progress,
+                                parallel=args.parallel, logger=args.logger, data_sha256=sha, verify=False)
+            if self.writer:
+                print_table(summary)
+                print(f"results: {where}/summary.json, curves.csv, curves.png", file=sys.stderr)
+
+    # 7. clean up
+    def clean_up(self, ok: bool) -> str | None:
+        """Everything the command holds given back; returns the failure of another process, if one failed."""
+        failed = self.local.close(ok) if self.local is not None else None
+        out, args = self.out, self.args
+        if self.replaced is not None and self.replaced.exists():
+            if ok or (out.is_dir() and any(out.rglob("*.msgpack"))):
+                shutil.rmtree(self.replaced, ignore_errors=True)
+            else:
+                shutil.rmtree(out, ignore_errors=True)
+                self.replaced.rename(out)
+                print(f"the earlier run in {out} is kept: the new one ended before its first checkpoint",
+                      file=sys.stderr)
+        claimed = out is not None and args.resume is None and args.out is None  # runs/<study>/<timestamp>
+        if claimed and out.is_dir() and not any(out.iterdir()):  # it got nothing (the data failed to load)
+            out.rmdir()
+        if self.lock is not None:
+            Path(self.lock.name).unlink(missing_ok=True)
+            self.lock.close()
+            for made in reversed(self.lock.created_dirs):  # parents of --out that the lock made, if nothing went there
+                try:
+                    made.rmdir()
+                except OSError:
+                    break
+        if claimed:
+            for empty in (out.parent, out.parent.parent):  # runs/<study>/ and runs/, if empty now
+                try:
+                    empty.rmdir()
+                except OSError:
+                    break
+        return failed
+
+
+def run_command(build: Build, parser: argparse.ArgumentParser, argv=None,
+                hparams: Callable[[argparse.Namespace], dict] | None = None,
+                hparam_dests: frozenset[str] = frozenset()) -> int:
+    """Parse, build the study (or studies: each in its own sub-directory), run; expected failures are one line.
+
+    For --config: `hparam_dests` are the flags that set single hyper-parameters, and `hparams(args)` the overrides
+    they make ({config field: value}, None for a flag not given)."""
+    command = Command(parser.parse_args(argv), parser, argv)
+    one_line_warnings()
+    ok, code = False, 1
+    try:
+        command.read(build, hparams, hparam_dests)
+        command.start_processes()
+        command.claim_output()
+        data = command.load()
+        shas = [fingerprint(ds) for ds in data]
+        command.check_resume(data, shas)
+        command.run(data, shas)
+        ok = True
+    except (UsageError, DatasetError, ValueError, OSError, Diverged) as e:
+        if os.environ.get("OFFRL_JAX_DEBUG") == "1":  # the traceback, for whoever is debugging the code
+            raise
+        print_error(e)
+        code = 3 if isinstance(e, Diverged) else 2
+        return code
+    except KeyboardInterrupt:
+        out = command.out
+        where = f"; resume with --resume {out}" if out is not None and (out / "config.json").is_file() else ""
+        print(f"interrupted{where}", file=sys.stderr)
+        code = 130
+        return code
+    finally:
+        failed = command.clean_up(ok)
+        if command.local is not None and not ok:  # leave now: JAX's exit handler would wait for the processes
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(code)
+    if failed is not None:
+        print_error(failed)
+        return 2
+    return 0

@@ -1,0 +1,139 @@
+"""A run's directory: where a new run writes, what --overwrite may replace, and the study (or studies) a run
+directory was started with.
+
+Rules: a new run writes to a new timestamped directory under runs/<study>/ unless --out is given; an existing,
+non-empty --out is refused unless --overwrite, and --overwrite replaces only a directory whose config.json is a
+saved study and which holds nothing a run does not write; --resume DIR continues the study (or studies) saved in
+DIR.  Nothing here deletes anything: `offrl_jax.app.command` moves an earlier run aside and gives it back.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+from offrl_jax.cli import UsageError
+from offrl_jax.study import Study, check_file_name
+
+
+def output_dir(args, study_name: str) -> tuple[Path, bool]:
+    """(directory, whether an earlier run in it is to be replaced); nothing is deleted here.  The default
+    runs/<study>/<timestamp>[-n] is claimed at once (created empty), so runs started in the same second differ."""
+    if args.resume is not None:
+        if not (args.resume / "config.json").is_file():
+            raise UsageError(f"{args.resume}: nothing to resume (no config.json)")
+        return args.resume, False
+    if args.out is None:
+        stamp = Path("runs") / study_name / time.strftime("%Y%m%d-%H%M%S")
+        stamp.parent.mkdir(parents=True, exist_ok=True)
+        for n in range(1, 1000):
+            out = stamp if n == 1 else stamp.with_name(f"{stamp.name}-{n}")
+            try:
+                out.mkdir()
+                return out, False
+            except FileExistsError:
+                continue
+        raise UsageError(f"{stamp}: too many runs started in one second")
+    if args.out.exists() and not args.out.is_dir():
+        raise UsageError(f"{args.out} is a file, not a directory")
+    if args.out.exists() and any(args.out.iterdir()):
+        if not args.overwrite:
+            raise UsageError(f"{args.out} exists and is not empty; pass --overwrite or choose another --out")
+        try:
+            saved = saved_studies(args.out)
+        except (UsageError, OSError):
+            raise UsageError(f"{args.out} holds no earlier run (no saved study in config.json); --overwrite will not "
+                             "delete it") from None
+        foreign = not_from_a_run(args.out, saved)
+        if foreign:
+            raise UsageError(f"{args.out} holds {', '.join(foreign[:5])}{', ...' if len(foreign) > 5 else ''}, which "
+                             "a run does not write; --overwrite replaces only a run: move them or choose another --out")
+        return args.out, True
+    return args.out, False
+
+
+# what a run writes in its directory (offrl_jax/runner.py, offrl_jax/loggers.py, offrl_jax/checkpoint.py)
+RUN_FILES = frozenset({"config.json", "curves.csv", "curves.png", "summary.json", "wandb-run-id"})
+RUN_FOLDERS = {"checkpoints": lambda name: name.endswith(".msgpack"),  # <variant>[.best|.<update>].msgpack
+               "tensorboard": lambda name: name.startswith("events.out.tfevents."),
+               "wandb": None}  # wandb's own folder (`--logger wandb`), whatever it holds
+
+
+def _temporary(name: str) -> bool:
+    """A temporary file of an atomic write a killed run left (`.<name>.<random>.tmp`)."""
+    return name.startswith(".") and name.endswith(".tmp")
+
+
+def not_from_a_run(out: Path, saved: Study | list[Study]) -> list[str]:
+    """The entries of run directory `out` that no run writes, as paths relative to `out`: what --overwrite must not
+    delete.  A run's folders may hold only what the run puts there; a study's sub-directory of a multi-study run is
+    a run directory itself."""
+    studies = {s.name for s in saved} if isinstance(saved, list) else set()
+
+    def foreign(folder: Path, prefix: str, nested: bool) -> list[str]:
+        found = []
+        for entry in sorted(folder.iterdir()):
+            where = f"{prefix}{entry.name}"
+            if nested and entry.name in studies and entry.is_dir() and not entry.is_symlink():
+                found += foreign(entry, f"{where}/", False)
+            elif entry.name in RUN_FOLDERS and entry.is_dir() and not entry.is_symlink():
+                if entry.name != "wandb":  # wandb's own folder, whatever it holds
+                    found += [f"{where}/{e.name}" for e in sorted(entry.iterdir())
+                              if not (e.is_file() and (RUN_FOLDERS[entry.name](e.name) or _temporary(e.name)))]
+            elif not ((entry.name in RUN_FILES or _temporary(entry.name)) and entry.is_file()):
+                found.append(where)
+        return found
+
+    return foreign(out, "", True)
+
+
+def refuse_existing(parser: argparse.ArgumentParser, out: Path | None, overwrite: bool, names: tuple[str, ...]) -> None:
+    """For commands that write a few named files (`names`) into --out: an --out that is a file, a directory holding
+    anything else (--overwrite replaces only those files), or a non-empty one without --overwrite is a usage error
+    (one line, exit 2), before any work is done."""
+    if out is None or not out.exists():
+        return
+    if not out.is_dir():
+        parser.error(f"{out} is a file, not a directory")
+    entries = sorted(out.iterdir())
+    others = [p.name for p in entries if p.name not in names or not p.is_file()]
+    if others:
+        listed = ", ".join(others[:3]) + (f" and {len(others) - 3} more" if len(others) > 3 else "")
+        parser.error(f"{out} holds {listed}, which this command does not write; --overwrite replaces only "
+                     f"{', '.join(names)}: choose another --out")
+    if entries and not overwrite:
+        parser.error(f"{out} exists and is not empty; pass --overwrite or choose another --out")
+
+
+def studies_json(studies: list[Study]) -> str:
+    """The top-level config.json of a multi-study run: every study whole, so --resume can start those not begun."""
+    return json.dumps({"studies": [json.loads(s.to_json()) for s in studies]}, indent=2) + "\n"
+
+
+def saved_studies(out: Path, path: Path | None = None) -> Study | list[Study]:
+    """The study (or studies) a run directory was started with, from its config.json (or `path`)."""
+    path = path or out / "config.json"
+    try:
+        raw = json.loads(path.read_text())
+        if "studies" not in raw:
+            return Study.from_json(path.read_text())
+        if all(isinstance(s, dict) for s in raw["studies"]):
+            return [Study.from_json(json.dumps(s)) for s in raw["studies"]]
+        # runs started before the top-level file held whole studies: only the studies begun have their config
+        for name in raw["studies"]:
+            check_file_name(f"{path}: a study's name", name)
+        begun = [name for name in raw["studies"] if (out / name / "config.json").is_file()]
+        if not begun:
+            raise UsageError(f"{path}: none of its studies had begun; start the run again instead of resuming it")
+        if len(begun) < len(raw["studies"]):
+            lost = ", ".join(n for n in raw["studies"] if n not in begun)
+            print(f"warning: {path} predates saving whole studies; not begun, so not resumed (run them again): "
+                  f"{lost}", file=sys.stderr)
+        return [Study.from_json((out / name / "config.json").read_text()) for name in begun]
+    except UsageError:
+        raise
+    except (KeyError, TypeError, AttributeError, ValueError) as e:  # bad JSON, or values a Study refuses
+        kind = "" if type(e) is ValueError else f"{type(e).__name__}: "
+        raise UsageError(f"{path}: not a saved study ({kind}{e})") from None

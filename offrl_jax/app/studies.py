@@ -1,0 +1,151 @@
+"""What the MuJoCo studies share: their flags (`parser`), the variants a command line asks for (`given`,
+`sweep_variants`, `pretrain_variants`) and the study they make (`make_study`).  Each `experiments/<name>.py` is a
+declaration on top of these: its defaults, the variants it compares and the flags it leaves out.
+
+A study's default config preset (`parser(default_preset=...)`: the main job's "published", TD3+BC's own alpha) is
+declared, not written into the parsed flags: it applies to the variants a study builds when no --preset is given,
+under every hyper-parameter flag, and is not part of the flags --config replays.
+"""
+from __future__ import annotations
+
+import argparse
+
+from offrl_jax.algos import ALGOS, PRESETS, SACNConfig, preset_values
+from offrl_jax.app.flags import FLAG_FIELDS, add_config_flags, config_values, run_args, sweepable_fields
+from offrl_jax.cli import OneLineParser, UsageError, positive_int
+from offrl_jax.study import Study, Variant
+
+ENVS = ("hopper", "halfcheetah", "walker2d")
+LEVELS = ("medium", "medium-replay", "full-replay", "medium-expert", "expert", "random")
+PRETRAIN = ("actor+critic", "actor", "critic", "none")
+LABELS = {"actor+critic": "pretrained", "none": "scratch", "actor": "actor-only", "critic": "critic-only"}
+
+
+def parser(prog: str, doc: str, updates: int = 100_000,
+           eval_every: int = 5_000, env: str = "hopper", edac_pretrain: dict | None = None, omit: tuple[str, ...] = (),
+           preset: bool = False, num_critics: str = "per env", seeds: int = 3, eval_episodes: int = 10,
+           default_preset: str | None = None) -> argparse.ArgumentParser:
+    """The flags every MuJoCo study shares; studies pass their own defaults (`edac_pretrain`: the study's EDAC
+    `pretrain_updates` / `actor_pretrain_fraction`, and `num_critics`, for the help text), leave out the flags
+    they set themselves (`omit`: destinations, e.g. ("pretrain", "lam")), and only the main job has `--preset paper`
+    (`preset`); `default_preset` names the config preset the study applies when no --preset is given."""
+    edac = {f: getattr(SACNConfig, f) for f in ("pretrain_updates", "actor_pretrain_fraction")} | (edac_pretrain or {})
+    p = OneLineParser(prog=prog, description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
+    group = p.add_argument_group("what to compare")
+
+    def add(flag: str, **kw) -> None:  # omitted flags are not offered: a study never accepts a flag it would ignore
+        if flag[2:].replace("-", "_") not in omit:
+            group.add_argument(flag, **kw)
+
+    add("--env", choices=ENVS, default=env)
+    add("--level", choices=LEVELS, default="medium", help="dataset level (default %(default)s)")
+    add("--algo", choices=tuple(ALGOS), default="td3bc", help="(default %(default)s)")
+    add("--pretrain", nargs="+", choices=PRETRAIN, default=["actor+critic", "none"],
+        help="pre-training modes to compare, one variant each (default: actor+critic none)")
+    add("--pretrain-updates", type=pretrain_budget, default=None,
+        help=f"N, or auto[:CAP] to end each pre-training phase when its supervised losses improve by less than 1 %% "
+             f"per 1k updates (every seed; capped at CAP or the default; the rest goes to offline RL; --eval-every "
+             f"must then be a multiple of 1000, e.g. 5000).  "
+             f"Default: 10k TD3+BC, {edac['pretrain_updates'] // 1000}k EDAC")
+    help_authors = ("authors: the authors' code switch by switch (LayerNorm without scale/bias and eps 1e-5, "
+                    "PyTorch init, a 3x256 TD3+BC actor, no bootstrap at time-outs, x/sg(x) loss balancing, the "
+                    "paper's per-env alphas; docs/fidelity.md); flags given with it override single values")
+    help_default = (f"published: TD3+BC's published alpha ({PRESETS['published']['td3bc']['alpha']}) instead of the "
+                    "paper's per-env values.  " if "published" in PRESETS else "")
+    if default_preset is not None:
+        help_default += f"Default: {default_preset}"
+    if preset:
+        add("--preset", nargs="+", choices=("paper", *PRESETS), default=None,
+            help="paper: 3 envs x {td3bc, edac} medium x --seeds seeds x 1M updates (evaluation every 10k), "
+                 "each in its own sub-directory; --env/--algo/--level/--updates/--eval-every other than their "
+                 "defaults are refused.  " + help_authors + ".  paper may be given with one other.  "
+                 + help_default)
+    else:
+        add("--preset", nargs=1, choices=tuple(PRESETS), default=None, help=help_authors + ".  " + help_default)
+    p.set_defaults(default_preset=default_preset)
+    add_config_flags(p, omit)
+    for action in p._actions:  # this study's defaults where they differ from the configs'
+        if action.dest == "num_critics":
+            action.help = f"EDAC/SAC-N ensemble size. Default: {num_critics}"
+        if action.dest == "actor_pretrain_fraction":
+            action.help = (f"EDAC: share of --pretrain-updates spent on soft BC, the rest on the critic. Default: "
+                           f"{edac['actor_pretrain_fraction']}")
+    run_args(p, updates=updates, eval_every=eval_every, seeds=seeds, eval_episodes=eval_episodes)
+    return p
+
+
+def pretrain_budget(text: str) -> dict:
+    """--pretrain-updates: "N" -> {pretrain_updates: N}; "auto" or "auto:CAP" -> self-ending pre-training."""
+    if text == "auto" or text.startswith("auto:"):
+        cap = positive_int(text[5:]) if text.startswith("auto:") else None
+        return {"pretrain_auto": True} | ({"pretrain_updates": cap} if cap else {})
+    return {"pretrain_updates": positive_int(text)}
+
+
+def overrides(args) -> dict:
+    """Config overrides from the flags (a flag not given, or omitted by the study, is left out)."""
+    return config_values(args, FLAG_FIELDS) | (getattr(args, "pretrain_updates", None) or {})
+
+
+HPARAM_DESTS = FLAG_FIELDS | {"pretrain_updates"}  # the flags that set one hyper-parameter each
+SWEPT = tuple(sorted(sweepable_fields()))  # flags that take several values (a sweep)
+
+
+def given(args) -> dict:
+    """The hyper-parameters set on the command line (the rest take the per-env defaults); a swept flag given one
+    value is that value, given several it stays a list (see `sweep_variants`)."""
+    values = overrides(args)
+    config_presets = [p for p in getattr(args, "preset", None) or [] if p in PRESETS]
+    if len(config_presets) > 1:
+        raise UsageError(f"--preset {' '.join(config_presets)}: one config preset at a time")
+    return values | ({"preset": config_presets[0]} if config_presets else {})
+
+
+def chosen(args) -> dict:
+    """`given(args)` under the study's declared default preset when no --preset was given: what its variants get."""
+    default = getattr(args, "default_preset", None)
+    return ({"preset": default} if default and not getattr(args, "preset", None) else {}) | given(args)
+
+
+def sweep_variants(label: str, algo: str, fixed: dict) -> tuple[Variant, ...]:
+    """One variant, or one per value of a swept flag (labels "pretrained alpha=2.5", ...); the runner trains a
+    sweep's variants as one vmapped program.  A "preset" entry of `fixed` is expanded into its values for `algo`
+    (every value is then recorded in the variant), under the other entries."""
+    fixed = dict(fixed)
+    fixed = preset_values(fixed.pop("preset", None), algo) | fixed
+    return _sweep_variants(label, algo, fixed)
+
+
+def _sweep_variants(label: str, algo: str, fixed: dict) -> tuple[Variant, ...]:
+    swept = [k for k in SWEPT if isinstance(fixed.get(k), list)]
+    if not swept:
+        return (Variant.of(label, algo, **fixed),)
+    if len(swept) > 1:
+        raise ValueError(f"sweep one hyper-parameter at a time, got several values for {' and '.join(swept)}")
+    name = swept[0]
+    return tuple(Variant.of(f"{label} {name}={value:g}", algo, **(fixed | {name: value})) for value in fixed[name])
+
+
+def pretrain_variants(algo: str, modes, args) -> tuple[Variant, ...]:
+    return tuple(v for mode in modes for v in sweep_variants(LABELS[mode], algo, {"pretrain": mode} | chosen(args)))
+
+
+def make_study(env: str, algo: str, level: str, args, extra: dict | None = None,
+               variants: tuple[Variant, ...] | None = None, reference: str | None = None, name: str = "") -> Study:
+    if variants is None:
+        variants = pretrain_variants(algo, args.pretrain, args)
+        reference = LABELS["none"] if "none" in args.pretrain else None
+    fields = study_fields(args) | (extra or {})
+    dataset = args.dataset_path or f"{env}-{level}"
+    return Study(name=name or f"{env}-{level}-{algo}", dataset=dataset, env=env, variants=variants,
+                 reference=reference, **fields)
+
+
+def study_fields(args) -> dict:
+    """Study fields from the run flags (a study without --updates / --eval-every sets those itself)."""
+    fields = dict(seeds=tuple(range(args.seed_offset, args.seed_offset + args.seeds)),
+                  eval_episodes=args.eval_episodes, batch_size=args.batch_size,
+                  checkpoint_every=args.checkpoint_every, keep_checkpoints=args.keep_checkpoints,
+                  max_transitions=args.max_transitions,
+                  clip_actions=args.clip_actions)
+    return fields | {k: getattr(args, k) for k in ("updates", "eval_every") if hasattr(args, k)}
