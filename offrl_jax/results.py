@@ -140,8 +140,9 @@ def plot_curves(path: Path, study: Study, rows: list[dict], pretrain_ends: dict[
             ax.axvline(pretrain_ends[v.label], color=line.get_color(), ls=":", lw=1)
     ax.set_xlabel("updates (pre-training included; dotted: end of pre-training)")
     ax.set_ylabel("D4RL-normalised score")
-    ax.set_title(f"{study.name}: {study.dataset}, {len(study.seeds)} seeds, IQM and stratified-bootstrap 95% CI",
-                 fontsize=10)
+    n = len(study.seeds)
+    spread = "IQM and stratified-bootstrap 95% CI" if n > 1 else "one seed: no interval"
+    ax.set_title(f"{study.name}: {study.dataset}, {n} seed{'s' if n > 1 else ''}, {spread}", fontsize=10)
     ax.grid(alpha=0.3)
     ax.legend()
     fig.tight_layout()
