@@ -79,7 +79,7 @@ def _unknown(name_or_path) -> DatasetError:
 
 
 def generate(name: str, *, transitions: int | None = None, out_dir=None, seed: int = 0,
-             overwrite: bool = False) -> Path:
+             overwrite: bool = False, shown_as: str | None = None) -> Path:
     """Generate a known dataset with `offrl_jax.data.generate` and return its Minari directory (an existing one is
     refused unless `overwrite`)."""
     if name not in KNOWN or name in SHARED_NAMES:
@@ -89,7 +89,7 @@ def generate(name: str, *, transitions: int | None = None, out_dir=None, seed: i
         from offrl_jax.data.generate import generate as _generate
     except ImportError as e:
         raise DatasetError(f"{name}: the dataset generator is not available ({e})") from None
-    kw = {"overwrite": True} if overwrite else {}
+    kw = ({"overwrite": True} if overwrite else {}) | ({"shown_as": shown_as} if shown_as else {})
     if name == "door-cloned":  # made from the human demonstrations, which the catalogue hands over
         kw["demos"] = load("door-human")
     return Path(_generate(name, transitions=transitions, out_dir=out_dir, seed=seed, **kw))
@@ -117,8 +117,9 @@ def _load_generated(name: str, max_transitions, clip_actions, generate_if_missin
             print(f"{name} is not cached: generating only the {max_transitions:,} transitions this run uses, not "
                   f"cached (python -m offrl_jax.datasets generate {name} caches the full dataset)", file=sys.stderr)
             with tempfile.TemporaryDirectory(prefix=f"offrl-{name}-") as tmp:
-                ds = read_minari(generate(name, transitions=max_transitions, out_dir=Path(tmp) / name),
-                                 env=get_env_spec(name).name, **kw)
+                made = generate(name, transitions=max_transitions, out_dir=Path(tmp) / name,
+                                shown_as="memory, for this run only (not cached)")
+                ds = read_minari(made, env=get_env_spec(name).name, **kw)
             return dataclasses.replace(ds, name=name)
         path = generate(name)
     ds = read_minari(path, env=get_env_spec(name).name, **kw)

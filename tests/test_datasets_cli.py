@@ -75,8 +75,8 @@ def test_load_generates_once_then_reads_cache(tmp_path, monkeypatch):
     monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "minari"))
     calls = []
 
-    def fake_generate(name, transitions=None, out_dir=None, seed=0):
-        calls.append((name, transitions, out_dir, seed))
+    def fake_generate(name, transitions=None, out_dir=None, seed=0, shown_as=None):
+        calls.append((name, transitions, out_dir, seed, shown_as))
         T = transitions
         rng = np.random.default_rng(seed)
         buffer = [EpisodeBuffer(observations=rng.normal(size=(T + 1, 11)).astype(np.float32),
@@ -97,6 +97,7 @@ def test_load_generates_once_then_reads_cache(tmp_path, monkeypatch):
     ds = datasets.load("hopper-medium", max_transitions=30)
     assert (len(ds), ds.env, ds.name) == (30, "hopper", "hopper-medium") and len(calls) == 1
     assert calls[0][1] == 30 and calls[0][2] is not None and not Path(calls[0][2]).exists()  # a deleted temporary
+    assert "not cached" in calls[0][4]  # what its [generate] line names instead of the deleted directory
     assert not datasets.is_cached("hopper-medium")
     # a full load generates into the cache; a capped load then takes the first rows of the cached one
     T = 40

@@ -236,7 +236,7 @@ def check_replaceable(out: Path) -> None:
 
 def generate(name: str, transitions: int | None = None, out_dir: str | Path | None = None, seed: int = 0,
              overwrite: bool = False, progress: bool = True, num_envs: int = 16,
-             sac_run: str | Path | None = None, demos: Dataset | None = None) -> Path:
+             sac_run: str | Path | None = None, demos: Dataset | None = None, shown_as: str | None = None) -> Path:
     """Generate dataset `name` (e.g. "hopper-medium") and write it with minari; returns its directory.
 
     transitions: cap on the number of rows (default 1M per policy; the replay levels default to the whole run).
@@ -244,6 +244,7 @@ def generate(name: str, transitions: int | None = None, out_dir: str | Path | No
         one raises unless overwrite, which replaces only a dataset directory written here (`check_replaceable`).
     seed: env / action-noise seed of the rollouts.  sac_run: SAC run directory for the replay levels.
     demos: the human demonstrations door-cloned is made from (`offrl_jax.datasets.load("door-human")`).
+    shown_as: what the closing `[generate]` line names as the destination (default: the directory written).
     """
     target = Path(out_dir) if out_dir is not None else default_dir(name)
     if overwrite and target.exists():
@@ -253,7 +254,8 @@ def generate(name: str, transitions: int | None = None, out_dir: str | Path | No
 
         if demos is None:
             raise ValueError("door-cloned is made from the door-human demonstrations: pass demos=")
-        return generate_door_cloned(demos, transitions, out_dir, seed, overwrite=overwrite, progress=progress)
+        return generate_door_cloned(demos, transitions, out_dir, seed, overwrite=overwrite, progress=progress,
+                                    shown_as=shown_as)
     env, level = parse_name(name)
     out = Path(out_dir) if out_dir is not None else default_dir(name)
     if out.exists() and not overwrite:
@@ -273,8 +275,9 @@ def generate(name: str, transitions: int | None = None, out_dir: str | Path | No
     atomic_write_text(out / "offrl_jax.json", json.dumps(info, indent=1))
     if progress:
         st = info["stats"]
-        print(f"[generate] {name}: {st['transitions']} transitions, {st['episodes']} episodes, "
-              f"return {st['return_mean']:.0f} (norm {st['normalized_score']:.1f}) in {info['total_s']:.0f}s -> {out}")
+        print(f"[generate] {name}: {st['transitions']} transitions, {st['episodes']} episodes, return "
+              f"{st['return_mean']:.0f} (norm {st['normalized_score']:.1f}) in {info['total_s']:.0f}s -> "
+              f"{shown_as or out}")
     return out
 
 

@@ -196,7 +196,7 @@ def build_door_cloned(demos: Dataset, transitions: int = DEFAULT_TRANSITIONS, se
 def generate_door_cloned(demos: Dataset, transitions: int | None = None, out_dir: str | Path | None = None,
                          seed: int = 0, *, overwrite: bool = False, progress: bool = True,
                          bc_updates: int = DEFAULT_BC_UPDATES, noise_std: float = DEFAULT_NOISE_STD,
-                         num_envs: int = 16) -> Path:
+                         num_envs: int = 16, shown_as: str | None = None) -> Path:
     """Generate door-cloned from the human demonstrations `demos` (`transitions` rows, half BC rollouts, half
     demonstrations) in Minari format; returns its
     directory (default `dataset_dir("door-cloned")`; an existing one raises unless overwrite)."""
@@ -231,7 +231,7 @@ def generate_door_cloned(demos: Dataset, transitions: int | None = None, out_dir
         st = info["stats"]
         print(f"[generate] {NAME}: {st['transitions']} transitions, {st['episodes']} episodes, return "
               f"{st['return_mean']:.0f} (norm {st['normalized_score']:.1f}; rollouts "
-              f"{info['stats_rollouts']['return_mean']:.0f}) in {info['total_s']:.0f}s -> {out}")
+              f"{info['stats_rollouts']['return_mean']:.0f}) in {info['total_s']:.0f}s -> {shown_as or out}")
     return out
 
 
