@@ -13,6 +13,7 @@ diversity loss runs its own second forward pass of the ensemble (CORL's `_critic
 The classes take keyword arguments beyond the benchmark's (sizes, LayerNorm form, what a TD target treats as done,
 the tanh log-det form, a log-alpha bound, injected sampling noise, the pre-training updates), all defaulting to the
 benchmark's settings, so that tests/test_parity_torch.py can check in float64 that the JAX updates equal these.
+`ReBRAC` and `IQL` (CORL's `rebrac.py` and `iql.py` updates) exist for those tests only.
 """
 from __future__ import annotations
 
@@ -339,6 +340,114 @@ class EDAC:
         q = self.critic(state, action)
         loss = ((q - soft_returns.view(1, -1)) ** 2).mean(dim=1).mean(dim=0)
         self.critic_step(loss + self.eta * self.diversity_loss(state, action))
+
+
+# ----------------------------------------------------------------------------------------------------------- ReBRAC
+
+
+class ReBRAC:
+    """CORL's ReBRAC update (Tarasov et al. 2023), for the parity tests: `update(batch, next_actions)` is one offline
+    step (the critics on every call; on every `policy_freq`-th, counting from the first, the actor on the same
+    minibatch after the critics, then every target).  The target policy's smoothing noise is left out
+    (`policy_noise` 0 in the tests), so both sides draw nothing."""
+
+    def __init__(self, actor_beta: float, critic_beta: float, gamma: float = 0.99, tau: float = 0.005,
+                 policy_freq: int = 2, actor_lr: float = 1e-3, critic_lr: float = 1e-3, obs_dim: int = OBS_DIM,
+                 act_dim: int = ACT_DIM, hidden: tuple[int, ...] = (256, 256, 256), ln_affine: bool = True,
+                 ln_eps: float = 1e-6):
+        self.actor = mlp(obs_dim, hidden, act_dim, layer_norm=False)
+        ln = dict(ln_affine=ln_affine, ln_eps=ln_eps)
+        self.critics = nn.ModuleList([mlp(obs_dim + act_dim, hidden, 1, **ln) for _ in range(2)])
+        self.actor_target, self.critics_target = copy.deepcopy(self.actor), copy.deepcopy(self.critics)
+        self.actor_opt = torch.optim.Adam(self.actor.parameters(), lr=actor_lr)
+        self.critic_opt = torch.optim.Adam(self.critics.parameters(), lr=critic_lr)
+        self.actor_beta, self.critic_beta, self.gamma, self.tau = actor_beta, critic_beta, gamma, tau
+        self.policy_freq, self.step = policy_freq, 0
+
+    def q(self, critics, s, a):  # (N, B)
+        return torch.stack([c(torch.cat([s, a], 1))[:, 0] for c in critics])
+
+    def update(self, batch, next_actions) -> None:
+        state, action, reward, next_state, done = batch
+        with torch.no_grad():
+            next_pi = torch.tanh(self.actor_target(next_state))
+            penalty = ((next_pi - next_actions) ** 2).sum(-1)
+            next_q = self.q(self.critics_target, next_state, next_pi).min(0).values - self.critic_beta * penalty
+            target = reward[:, 0] + self.gamma * (1 - done[:, 0]) * next_q
+        loss = ((self.q(self.critics, state, action) - target[None]) ** 2).mean(1).sum(0)
+        self.critic_opt.zero_grad()
+        loss.backward()
+        self.critic_opt.step()
+        if self.step % self.policy_freq == 0:
+            pi = torch.tanh(self.actor(state))
+            q = self.q(self.critics, state, pi).min(0).values
+            lmbda = 1 / q.abs().mean().detach()
+            actor_loss = (self.actor_beta * ((pi - action) ** 2).sum(-1) - lmbda * q).mean()
+            self.actor_opt.zero_grad()
+            actor_loss.backward()
+            self.actor_opt.step()
+            polyak(self.actor, self.actor_target, self.tau)
+            polyak(self.critics, self.critics_target, self.tau)
+        self.step += 1
+
+
+# -------------------------------------------------------------------------------------------------------------- IQL
+
+
+class IQL:
+    """CORL's IQL update (Kostrikov et al. 2022), for the parity tests: `update(batch)` is V (expectile regression on
+    the target twin critics' min), then Q (on r + gamma (1 - d) V(s'), V(s') from before the V step; Polyak), then
+    the actor (exp(beta A) clipped at 100 times the dataset action's negative log-likelihood under a Gaussian with a
+    state-independent std, or its squared error for a deterministic actor) with a cosine learning-rate schedule."""
+
+    def __init__(self, expectile: float = 0.7, beta: float = 3.0, gamma: float = 0.99, tau: float = 0.005,
+                 lr: float = 3e-4, lr_steps: int = 1_000_000, deterministic: bool = False, obs_dim: int = OBS_DIM,
+                 act_dim: int = ACT_DIM, hidden: tuple[int, ...] = (256, 256), log_std_bounds=(-20.0, 2.0)):
+        self.actor = mlp(obs_dim, hidden, act_dim, layer_norm=False)
+        self.log_std = nn.Parameter(torch.zeros(act_dim))
+        self.critics = nn.ModuleList([mlp(obs_dim + act_dim, hidden, 1, layer_norm=False) for _ in range(2)])
+        self.critics_target = copy.deepcopy(self.critics)
+        self.value = mlp(obs_dim, hidden, 1, layer_norm=False)
+        actor_params = list(self.actor.parameters()) + ([] if deterministic else [self.log_std])
+        self.actor_opt = torch.optim.Adam(actor_params, lr=lr)
+        self.schedule = torch.optim.lr_scheduler.CosineAnnealingLR(self.actor_opt, lr_steps)
+        self.critic_opt = torch.optim.Adam(self.critics.parameters(), lr=lr)
+        self.value_opt = torch.optim.Adam(self.value.parameters(), lr=lr)
+        self.expectile, self.beta, self.gamma, self.tau = expectile, beta, gamma, tau
+        self.deterministic, self.log_std_bounds = deterministic, log_std_bounds
+
+    def q(self, critics, s, a):  # (N, B)
+        return torch.stack([c(torch.cat([s, a], 1))[:, 0] for c in critics])
+
+    def update(self, batch) -> None:
+        state, action, reward, next_state, done = batch
+        with torch.no_grad():
+            next_v = self.value(next_state)[:, 0]
+            target_q = self.q(self.critics_target, state, action).min(0).values
+        adv = target_q - self.value(state)[:, 0]
+        v_loss = (torch.abs(self.expectile - (adv < 0).double()) * adv ** 2).mean()
+        self.value_opt.zero_grad()
+        v_loss.backward()
+        self.value_opt.step()
+        target = reward[:, 0] + (1 - done[:, 0]) * self.gamma * next_v
+        q = self.q(self.critics, state, action)
+        q_loss = sum(F.mse_loss(qi, target) for qi in q) / len(q)
+        self.critic_opt.zero_grad()
+        q_loss.backward()
+        self.critic_opt.step()
+        polyak(self.critics, self.critics_target, self.tau)
+        weight = torch.exp(self.beta * adv.detach()).clamp(max=100.0)
+        mean = torch.tanh(self.actor(state))
+        if self.deterministic:
+            nll = ((mean - action) ** 2).sum(1)
+        else:
+            std = torch.exp(self.log_std.clamp(*self.log_std_bounds))
+            nll = -torch.distributions.Normal(mean, std).log_prob(action).sum(-1)
+        actor_loss = (weight * nll).mean()
+        self.actor_opt.zero_grad()
+        actor_loss.backward()
+        self.actor_opt.step()
+        self.schedule.step()
 
 
 # ----------------------------------------------------------------------------------------------------------- timing

@@ -1,5 +1,8 @@
-"""Float64 parity: our TD3+BC and EDAC updates equal a PyTorch reference update (`benchmarks.torch_reference`, written
-the way CORL writes them, from Fujimoto & Gu 2021 and An et al. 2021) to rounding.
+"""Float64 parity: our TD3+BC, EDAC, ReBRAC and IQL updates equal a PyTorch reference update
+(`benchmarks.torch_reference`, written the way CORL writes them, from Fujimoto & Gu 2021, An et al. 2021, Tarasov et
+al. 2023 and Kostrikov et al. 2022) to rounding.  ReBRAC and IQL are built from their own per-env defaults (their
+LayerNorm and epsilon as they ship), with the target-policy noise off; each test also checks that every network
+moved, so agreement is not two sides standing still.
 
 Each test builds our algorithm with `make_config(..., preset="authors")` (torch's LayerNorm epsilon 1e-5, the authors'
 LayerNorm without affine parameters, lambda = alpha / mean|Q| with no epsilon, ...), copies its initial parameters
@@ -118,6 +121,8 @@ def mlp_pairs(prefix: str, mlp: dict, linears, norms, member: int | None = None)
     for i, (d, lin) in enumerate(zip(dense, linears)):
         pairs += [(f"{prefix}.Dense_{i}.kernel", pick(d["kernel"]).T, lin.weight),
                   (f"{prefix}.Dense_{i}.bias", pick(d["bias"]), lin.bias)]
+    if not norms:  # no LayerNorm on the torch side: none with parameters on ours either
+        flax_norms = [n for n in flax_norms if n is not None]
     assert len(flax_norms) == len(norms)
     for i, (n, norm) in enumerate(zip(flax_norms, norms)):
         assert (n is None) == (norm.weight is None), "LayerNorm affine parameters on one side only"
@@ -369,3 +374,108 @@ def test_edac_pretrain_updates_match_torch(monkeypatch):
             agent.update(torch_batch(b, cfg.timeouts), recorder.take(3))
         assert not recorder.draws
         compare("edac pretrain + rl", edac_pairs(state, agent))
+
+
+# ----------------------------------------------------------------------------------------------------- ReBRAC
+
+
+def assert_moved(before, after, groups) -> None:
+    """Every group of arrays (names starting with one of `groups`) changed in the updates: agreement is not two
+    sides standing still."""
+    old = {name: ours for name, ours, _ in before}
+    for group in groups:
+        change = max(float(np.max(np.abs(ours - old[name]))) for name, ours, _ in after if name.startswith(group))
+        assert change > 1e-5, f"{group}: the updates did not change it ({change:.1e})"
+
+
+def critic_pairs(prefix: str, params, critics):
+    return [p for i, c in enumerate(critics) for p in mlp_pairs(
+        f"{prefix}{i}", params["params"]["VmapCritic_0"]["MLP_0"], torch_layers(c, nn.Linear),
+        torch_layers(c, nn.LayerNorm), member=i)]
+
+
+def rebrac_pairs(state, agent: ref.ReBRAC):
+    pairs = []
+    for tag, actor_params, critic_params, actor, critics in (
+        ("", state.actor.params, state.critic.params, agent.actor, agent.critics),
+        ("target.", state.actor.target, state.critic.target, agent.actor_target, agent.critics_target),
+    ):
+        pairs += mlp_pairs(f"{tag}actor", actor_params["params"]["MLP_0"], torch_layers(actor, nn.Linear), [])
+        pairs += critic_pairs(f"{tag}critic", critic_params, critics)
+    return pairs
+
+
+def test_rebrac_rl_update_matches_torch():
+    """10 offline-RL updates (5 calls: the critics on both minibatches, the actor and every target after the first),
+    with both behaviour penalties on and the dataset's next actions in the critic's target."""
+    from offrl_jax.driver import next_actions
+
+    data = dataset()
+    data["next_actions"] = np.asarray(next_actions(jnp.asarray(data["actions"]), jnp.asarray(data["terminals"]),
+                                                   jnp.asarray(data["timeouts"])))
+    with float64():
+        cfg = make_config("rebrac", "walker2d", hidden=(32, 32, 32), policy_noise=0.0, timeouts="stop")
+        assert (cfg.actor_beta, cfg.critic_beta, cfg.policy_delay) == (0.05, 0.1, 2)
+        algo = make_algorithm(cfg, OBS, ACT, ROWS)
+        state = to64(algo.init(jax.random.key(0)))
+        agent = ref.ReBRAC(cfg.actor_beta, cfg.critic_beta, cfg.gamma, cfg.tau, cfg.policy_delay, cfg.actor_lr,
+                           cfg.critic_lr, OBS, ACT, cfg.hidden, cfg.layer_norm_affine, cfg.layer_norm_eps)
+        copy_in(rebrac_pairs(state, agent))
+        before = rebrac_pairs(state, agent)
+        b = minibatches(data, 1, seed=7)[0]
+        s, a = torch_batch(b, "stop")[:2]
+        with torch.no_grad():
+            ours_q = algo.critic.apply(state.critic.params, jnp.asarray(b["observations"]), jnp.asarray(b["actions"]))
+            np.testing.assert_allclose(np.asarray(ours_q), agent.q(agent.critics, s, a).numpy(), rtol=0, atol=1e-12)
+        phase = algo.phases(20_000)[-1]
+        assert phase.name == "offline_rl" and phase.updates_per_call == 2
+        update = jax.jit(phase.update)
+        batches = minibatches(data, 10)
+        for call in range(5):
+            pair = batches[2 * call:2 * call + 2]
+            state, _ = update(state, stack(pair), jax.random.key(call))
+            for b in pair:
+                agent.update(torch_batch(b, "stop"), torch.tensor(b["next_actions"]))
+        compare("rebrac rl", rebrac_pairs(state, agent))
+        assert_moved(before, rebrac_pairs(state, agent), ("actor", "critic", "target.actor", "target.critic"))
+
+
+# -------------------------------------------------------------------------------------------------------- IQL
+
+
+def iql_pairs(state, agent: ref.IQL):
+    pairs = mlp_pairs("actor", state.actor.params["params"]["MLP_0"], torch_layers(agent.actor, nn.Linear), [])
+    if not agent.deterministic:
+        pairs.append(("actor.log_std", np.asarray(state.actor.params["params"]["log_std"]), agent.log_std))
+    pairs += critic_pairs("critic", state.critic.params, agent.critics)
+    pairs += critic_pairs("target.critic", state.critic.target, agent.critics_target)
+    pairs += mlp_pairs("value", state.value.params["params"]["MLP_0"], torch_layers(agent.value, nn.Linear), [])
+    return pairs
+
+
+@pytest.mark.parametrize("env", ["halfcheetah", "hopper"])  # a Gaussian actor; CORL's deterministic hopper actor
+def test_iql_rl_update_matches_torch(env):
+    """10 IQL updates (V, then Q with V(s') from before the V step and its Polyak, then advantage-weighted regression
+    with the actor's cosine learning rate over 20 steps, so the schedule shows)."""
+    data = dataset()
+    with float64():
+        cfg = make_config("iql", env, hidden=(32, 32), actor_lr_decay=20, timeouts="stop")
+        assert cfg.actor_lr == cfg.critic_lr == cfg.value_lr and cfg.deterministic == (env == "hopper")
+        algo = make_algorithm(cfg, OBS, ACT, ROWS)
+        state = to64(algo.init(jax.random.key(0)))
+        agent = ref.IQL(cfg.expectile, cfg.beta, cfg.gamma, cfg.tau, cfg.actor_lr, cfg.actor_lr_decay,
+                        cfg.deterministic, OBS, ACT, cfg.hidden)
+        copy_in(iql_pairs(state, agent))
+        with torch.no_grad():  # a log_std away from 0, so that the Gaussian's gradient through it is exercised
+            agent.log_std.copy_(torch.linspace(-0.5, 0.3, ACT))
+        if not cfg.deterministic:
+            params = state.actor.params
+            params = {"params": params["params"] | {"log_std": jnp.linspace(-0.5, 0.3, ACT)}}
+            state = state.replace(actor=state.actor.replace(params=params))
+        before = iql_pairs(state, agent)
+        update = jax.jit(algo.phases(20_000)[-1].update)
+        for i, b in enumerate(minibatches(data, 10)):
+            state, _ = update(state, stack([b]), jax.random.key(i))
+            agent.update(torch_batch(b, "stop"))
+        compare(f"iql rl ({env})", iql_pairs(state, agent))
+        assert_moved(before, iql_pairs(state, agent), ("actor", "critic", "target.critic", "value"))
