@@ -50,7 +50,8 @@ REPLAY_FLAGS = frozenset({"config", "out", "overwrite", "parallel", "no_progress
 
 def given_dests(parser: argparse.ArgumentParser, argv=None) -> set[str]:
     """The destinations of the flags typed on the command line (typed with their default value too)."""
-    probe = argparse.Namespace(**{a.dest: _UNSET for a in parser._actions if a.dest != argparse.SUPPRESS})
+    dests = [a.dest for a in parser._actions if a.dest != argparse.SUPPRESS] + list(parser._defaults)
+    probe = argparse.Namespace(**{dest: _UNSET for dest in dests})  # `set_defaults` entries are never typed
     parser.parse_args(sys.argv[1:] if argv is None else argv, probe)
     return {dest for dest, value in vars(probe).items() if value is not _UNSET}
 
