@@ -102,7 +102,8 @@ def hand_over() -> None:
     """From `run_main`: the command's own Ctrl-C handling (`during_command`) replaces `quiet_start`'s."""
     if signal.getsignal(signal.SIGINT) in (_interrupted_while_starting, signal.default_int_handler):
         signal.signal(signal.SIGINT, during_command)
-        if signal.getsignal(signal.SIGTERM) is signal.SIG_DFL:  # `kill`, a scheduler's stop: the same as Ctrl-C
-            signal.signal(signal.SIGTERM, during_command)
+    # `kill`, a scheduler's stop: the same as Ctrl-C, also for a background job, whose SIGINT the shell ignores
+    if signal.getsignal(signal.SIGTERM) is signal.SIG_DFL:
+        signal.signal(signal.SIGTERM, during_command)
     if sys.excepthook is _could_not_start:  # the command reports its own errors from here on
         sys.excepthook = sys.__excepthook__

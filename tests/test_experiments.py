@@ -130,12 +130,15 @@ def test_kill_and_resume_equals_uninterrupted_run(tmp_path, tiny_hdf5):
     assert (killed / "summary.json").exists() and (killed / "curves.png").exists()
 
 
-def test_sigterm_is_a_stop_with_the_resume_command(tmp_path, tiny_hdf5):
-    """`kill PID` (a scheduler's stop): the same one line as Ctrl-C, with the resume command, and exit 143."""
+@pytest.mark.parametrize("background", [False, True])
+def test_sigterm_is_a_stop_with_the_resume_command(tmp_path, tiny_hdf5, background):
+    """`kill PID` (a scheduler's stop): the same one line as Ctrl-C, with the resume command, and exit 143; also for
+    a background job of a shell (`cmd &`: SIGINT ignored from the start) training its variants in worker processes."""
     stopped = tmp_path / "stopped"
+    ignore_sigint = (lambda: signal.signal(signal.SIGINT, signal.SIG_IGN)) if background else None
     proc = subprocess.Popen([sys.executable, "-m", "experiments.mujoco_medium", "--dataset-path", str(tiny_hdf5),
-                             "--out", str(stopped), "--parallel", "1", *TINY], cwd=ROOT, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE, text=True)
+                             "--out", str(stopped), "--parallel", "2" if background else "1", *TINY], cwd=ROOT,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, preexec_fn=ignore_sigint)
     checkpoint = stopped / "checkpoints" / "pretrained.msgpack"
     deadline = time.time() + 300
     while not checkpoint.exists() and time.time() < deadline and proc.poll() is None:
