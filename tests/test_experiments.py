@@ -130,12 +130,18 @@ def test_kill_and_resume_equals_uninterrupted_run(tmp_path, tiny_hdf5):
     assert (killed / "summary.json").exists() and (killed / "curves.png").exists()
 
 
+def terminal_sigint() -> None:
+    """In the child: SIGINT as a terminal's foreground command has it, even when the tests themselves run as a
+    background job (which a shell starts with SIGINT ignored, and children inherit that)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 @pytest.mark.parametrize("background", [False, True])
 def test_sigterm_is_a_stop_with_the_resume_command(tmp_path, tiny_hdf5, background):
     """`kill PID` (a scheduler's stop): the same one line as Ctrl-C, with the resume command, and exit 143; also for
     a background job of a shell (`cmd &`: SIGINT ignored from the start) training its variants in worker processes."""
     stopped = tmp_path / "stopped"
-    ignore_sigint = (lambda: signal.signal(signal.SIGINT, signal.SIG_IGN)) if background else None
+    ignore_sigint = (lambda: signal.signal(signal.SIGINT, signal.SIG_IGN)) if background else terminal_sigint
     proc = subprocess.Popen([sys.executable, "-m", "experiments.mujoco_medium", "--dataset-path", str(tiny_hdf5),
                              "--out", str(stopped), "--parallel", "2" if background else "1", *TINY], cwd=ROOT,
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, preexec_fn=ignore_sigint)
@@ -157,7 +163,8 @@ def test_ctrl_c_stops_the_worker_processes_and_the_run_resumes(tmp_path, tiny_hd
     cli("--dataset-path", tiny_hdf5, "--out", full, *TINY, check=True, timeout=600)
     proc = subprocess.Popen([sys.executable, "-m", "experiments.mujoco_medium", "--dataset-path", str(tiny_hdf5),
                              "--out", str(stopped), "--no-progress", *TINY], cwd=ROOT, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+                            stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            preexec_fn=terminal_sigint)
     checkpoint = stopped / "checkpoints" / "pretrained.msgpack"
     deadline = time.time() + 300
     while not checkpoint.exists() and time.time() < deadline and proc.poll() is None:
