@@ -345,6 +345,11 @@ class EDAC:
 # ----------------------------------------------------------------------------------------------------------- ReBRAC
 
 
+def ensemble_q(critics, s, a):
+    """(N, B): every critic's Q(s, a), for ReBRAC's and IQL's twin critics (an nn.ModuleList of MLPs)."""
+    return torch.stack([c(torch.cat([s, a], 1))[:, 0] for c in critics])
+
+
 class ReBRAC:
     """CORL's ReBRAC update (Tarasov et al. 2023), for the parity tests: `update(batch, next_actions)` is one offline
     step (the critics on every call; on every `policy_freq`-th, counting from the first, the actor on the same
@@ -364,23 +369,20 @@ class ReBRAC:
         self.actor_beta, self.critic_beta, self.gamma, self.tau = actor_beta, critic_beta, gamma, tau
         self.policy_freq, self.step = policy_freq, 0
 
-    def q(self, critics, s, a):  # (N, B)
-        return torch.stack([c(torch.cat([s, a], 1))[:, 0] for c in critics])
-
     def update(self, batch, next_actions) -> None:
         state, action, reward, next_state, done = batch
         with torch.no_grad():
             next_pi = torch.tanh(self.actor_target(next_state))
             penalty = ((next_pi - next_actions) ** 2).sum(-1)
-            next_q = self.q(self.critics_target, next_state, next_pi).min(0).values - self.critic_beta * penalty
+            next_q = ensemble_q(self.critics_target, next_state, next_pi).min(0).values - self.critic_beta * penalty
             target = reward[:, 0] + self.gamma * (1 - done[:, 0]) * next_q
-        loss = ((self.q(self.critics, state, action) - target[None]) ** 2).mean(1).sum(0)
+        loss = ((ensemble_q(self.critics, state, action) - target[None]) ** 2).mean(1).sum(0)
         self.critic_opt.zero_grad()
         loss.backward()
         self.critic_opt.step()
         if self.step % self.policy_freq == 0:
             pi = torch.tanh(self.actor(state))
-            q = self.q(self.critics, state, pi).min(0).values
+            q = ensemble_q(self.critics, state, pi).min(0).values
             lmbda = 1 / q.abs().mean().detach()
             actor_loss = (self.actor_beta * ((pi - action) ** 2).sum(-1) - lmbda * q).mean()
             self.actor_opt.zero_grad()
@@ -416,21 +418,18 @@ class IQL:
         self.expectile, self.beta, self.gamma, self.tau = expectile, beta, gamma, tau
         self.deterministic, self.log_std_bounds = deterministic, log_std_bounds
 
-    def q(self, critics, s, a):  # (N, B)
-        return torch.stack([c(torch.cat([s, a], 1))[:, 0] for c in critics])
-
     def update(self, batch) -> None:
         state, action, reward, next_state, done = batch
         with torch.no_grad():
             next_v = self.value(next_state)[:, 0]
-            target_q = self.q(self.critics_target, state, action).min(0).values
+            target_q = ensemble_q(self.critics_target, state, action).min(0).values
         adv = target_q - self.value(state)[:, 0]
         v_loss = (torch.abs(self.expectile - (adv < 0).double()) * adv ** 2).mean()
         self.value_opt.zero_grad()
         v_loss.backward()
         self.value_opt.step()
         target = reward[:, 0] + (1 - done[:, 0]) * self.gamma * next_v
-        q = self.q(self.critics, state, action)
+        q = ensemble_q(self.critics, state, action)
         q_loss = sum(F.mse_loss(qi, target) for qi in q) / len(q)
         self.critic_opt.zero_grad()
         q_loss.backward()

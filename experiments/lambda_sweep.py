@@ -9,11 +9,11 @@ mixing.
 """
 
 from offrl_jax.app.command import run_command
-from offrl_jax.app.studies import given, make_study, parser, sweep_variants
+from offrl_jax.app.studies import chosen, make_study, parser, sweep_variants
 
 
 def build(args):
-    extra = given(args)
+    extra = chosen(args)
     variants = tuple(v for lam in args.lambdas
                      for v in sweep_variants(f"lambda={lam:g}", args.algo,
                                              {"pretrain": "actor+critic", "lam": lam} | extra))

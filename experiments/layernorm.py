@@ -7,7 +7,7 @@ variant, evaluation every 2k (8 runs in all: ~1 hour on 2 cores; pass --env to r
 """
 
 from offrl_jax.app.command import run_command
-from offrl_jax.app.studies import given, make_study, parser, sweep_variants
+from offrl_jax.app.studies import chosen, make_study, parser, sweep_variants
 
 COMBOS = {"LN actor+critic": (True, True), "LN actor only": (True, False), "LN critic only": (False, True),
           "no LN": (False, False)}
@@ -15,7 +15,7 @@ COMBOS = {"LN actor+critic": (True, True), "LN actor only": (True, False), "LN c
 
 def build(args):
     envs = [args.env] if args.env else ["hopper", "halfcheetah"]
-    extra = given(args)
+    extra = chosen(args)
     studies = []
     for env in envs:
         variants = tuple(v for label, (a, c) in COMBOS.items()

@@ -8,11 +8,11 @@ evaluation every 2k (~30 min on one core).  The paper: 1M updates.
 """
 
 from offrl_jax.app.command import run_command
-from offrl_jax.app.studies import given, make_study, parser, sweep_variants
+from offrl_jax.app.studies import chosen, make_study, parser, sweep_variants
 
 
 def build(args):
-    extra = given(args)  # the max(MC, Q) target is TD3+BC's (`TD3BCConfig.target`)
+    extra = chosen(args)  # the max(MC, Q) target is TD3+BC's (`TD3BCConfig.target`)
     variants = (sweep_variants("pretrained", "td3bc", {"pretrain": "actor+critic"} | extra)
                 + sweep_variants("max(MC,Q) target", "td3bc", {"pretrain": "none", "target": "max_mc"} | extra)
                 + sweep_variants("scratch", "td3bc", {"pretrain": "none"} | extra))

@@ -150,6 +150,21 @@ def compare(label: str, pairs) -> float:
     return diffs[worst]
 
 
+def delayed_rl_updates(algo, state, data, torch_update, calls: int = 5):
+    """`calls` calls of our offline-RL update, each on 2 minibatches (critic steps on both, the delayed actor and
+    the targets once), with `torch_update(minibatch)` run on each minibatch in the same order; our new state."""
+    phase = algo.phases(20_000)[-1]
+    assert phase.name == "offline_rl" and phase.updates_per_call == 2
+    update = jax.jit(phase.update)
+    batches = minibatches(data, 2 * calls)
+    for call in range(calls):
+        pair = batches[2 * call:2 * call + 2]
+        state, _ = update(state, stack(pair), jax.random.key(call))
+        for b in pair:
+            torch_update(b)
+    return state
+
+
 # ----------------------------------------------------------------------------------------------------- TD3+BC
 
 
@@ -199,15 +214,7 @@ def test_td3bc_rl_update_matches_torch(affine, timeouts):
     data = dataset()
     with float64():
         cfg, algo, state, agent = td3bc_setup(affine, timeouts)
-        phase = algo.phases(20_000)[-1]
-        assert phase.name == "offline_rl" and phase.updates_per_call == 2
-        update = jax.jit(phase.update)
-        batches = minibatches(data, 10)
-        for call in range(5):
-            pair = batches[2 * call:2 * call + 2]
-            state, _ = update(state, stack(pair), jax.random.key(call))
-            for b in pair:
-                agent.train(torch_batch(b, timeouts))
+        state = delayed_rl_updates(algo, state, data, lambda b: agent.train(torch_batch(b, timeouts)))
         compare(f"td3bc rl (affine={affine}, timeouts={timeouts})", td3bc_pairs(state, agent))
 
 
@@ -426,16 +433,10 @@ def test_rebrac_rl_update_matches_torch():
         s, a = torch_batch(b, "stop")[:2]
         with torch.no_grad():
             ours_q = algo.critic.apply(state.critic.params, jnp.asarray(b["observations"]), jnp.asarray(b["actions"]))
-            np.testing.assert_allclose(np.asarray(ours_q), agent.q(agent.critics, s, a).numpy(), rtol=0, atol=1e-12)
-        phase = algo.phases(20_000)[-1]
-        assert phase.name == "offline_rl" and phase.updates_per_call == 2
-        update = jax.jit(phase.update)
-        batches = minibatches(data, 10)
-        for call in range(5):
-            pair = batches[2 * call:2 * call + 2]
-            state, _ = update(state, stack(pair), jax.random.key(call))
-            for b in pair:
-                agent.update(torch_batch(b, "stop"), torch.tensor(b["next_actions"]))
+            torch_q = ref.ensemble_q(agent.critics, s, a).numpy()
+            np.testing.assert_allclose(np.asarray(ours_q), torch_q, rtol=0, atol=1e-12)
+        state = delayed_rl_updates(algo, state, data,
+                                   lambda b: agent.update(torch_batch(b, "stop"), torch.tensor(b["next_actions"])))
         compare("rebrac rl", rebrac_pairs(state, agent))
         assert_moved(before, rebrac_pairs(state, agent), ("actor", "critic", "target.actor", "target.critic"))
 
