@@ -11,8 +11,8 @@ dropped.
 Randomness is a pure function of (seed, global update index): the key of the update call at update u is
 fold_in(fold_in(PRNGKey(seed), CHUNK), u), drawn inside the scan.  So how the updates are cut into chunks (the
 evaluation interval, a resume, a self-ending phase's windows) does not change training, and seed i of a run is a
-single run with seed i (exactly with `lax.map`; up to the float rounding of batched matmuls with `vmap`, bounded in
-tests/test_driver.py).
+single run with seed i (exactly with `lax.map`; with `vmap` up to the rounding of batched matmuls, which float32 RL
+training amplifies as it does across machines: tests/test_driver.py).
 
 A hyper-parameter sweep (`Driver(..., sweep=("alpha", (1.0, 2.5, 10.0)))`) runs every (value, seed) pair as one
 member of the same vmapped program: the members' axis is value-major (member j * S + i = value j, seed i), each member
