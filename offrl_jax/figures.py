@@ -85,8 +85,9 @@ def plot_studies(study_dirs: list[Path], path: Path, reference: bool = True, ove
         if behaviour is not None:
             ax.axhline(behaviour, color="grey", ls="--", lw=1, label=f"behaviour data ({behaviour:.1f})")
         if not overlay:
-            ax.set_title(f"{summary[0]['dataset']}, {ALGO_NAMES.get(algo, algo)} ({len(summary[0]['seeds'])} "
-                         "seeds)", fontsize=10)
+            n = len(summary[0]["seeds"])
+            ax.set_title(f"{summary[0]['dataset']}, {ALGO_NAMES.get(algo, algo)} ({n} seed{'s' * (n != 1)})",
+                         fontsize=10)
         ax.xaxis.set_major_formatter(FuncFormatter(updates_label))
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7)

@@ -125,7 +125,8 @@ class Study:
         object.__setattr__(self, "_configs", configs)  # not a field: not in to_json, equality or replace
         widest = max(len(group) for group, _ in self.groups()) * len(self.seeds)
         if widest > MAX_MEMBERS:
-            what = f"{len(self.seeds)} seeds" + (" x sweep values" if widest > len(self.seeds) else "")
+            n = len(self.seeds)
+            what = f"{n} seed{'s' * (n != 1)}" + (" x sweep values" if widest > n else "")
             raise ValueError(f"Study.seeds: {what} make {widest:,} members of one program, over the {MAX_MEMBERS:,} "
                              "this library trains at once (every member's networks and optimiser state are in memory "
                              "together)")

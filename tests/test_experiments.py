@@ -152,7 +152,8 @@ def test_sigterm_is_a_stop_with_the_resume_command(tmp_path, tiny_hdf5, backgrou
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 143, err
-    assert f"interrupted; resume with --resume {stopped}" in err and "Traceback" not in err
+    assert f"interrupted; resume with --resume {stopped} --no-progress\n" in err and "Traceback" not in err
+    assert ("\n" + err).count("\ninterrupted; resume") == 1, err  # on a line of its own, not on the progress bar's
 
 
 def test_ctrl_c_stops_the_worker_processes_and_the_run_resumes(tmp_path, tiny_hdf5):
@@ -172,7 +173,7 @@ def test_ctrl_c_stops_the_worker_processes_and_the_run_resumes(tmp_path, tiny_hd
     os.killpg(proc.pid, signal.SIGINT)
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 130, err
-    assert f"interrupted; resume with --resume {stopped}" in err and "Traceback" not in err
+    assert f"interrupted; resume with --resume {stopped} --no-progress\n" in err and "Traceback" not in err
     assert not (stopped / "summary.json").exists()
     result = cli("--resume", stopped, "--no-progress", timeout=600)
     assert result.returncode == 0, result.stderr

@@ -244,3 +244,11 @@ def test_an_old_multi_study_config_refuses_a_name_outside_its_run(tmp_path, name
     (tmp_path / "config.json").write_text(json.dumps({"studies": [name]}))  # the old format: names only
     with pytest.raises(UsageError, match="a study's name"):
         saved_studies(tmp_path)
+
+
+@pytest.mark.parametrize("path, name", [("my-hopper.npz", "my-hopper-td3bc"),
+                                        ("mujoco/hopper/medium-v0", "mujoco-hopper-medium-v0-td3bc")])
+def test_a_study_on_a_users_dataset_is_named_after_it(path, name):
+    """Not "hopper-medium-td3bc": the generated dataset of that name is not what trained."""
+    (study,) = build(mujoco_medium, ["--dataset-path", path])
+    assert study.name == name and study.dataset == path

@@ -19,6 +19,7 @@ import argparse
 import dataclasses
 import importlib.util
 import os
+import shlex
 import shutil
 import sys
 from collections.abc import Callable
@@ -288,7 +289,9 @@ def run_command(build: Build, parser: argparse.ArgumentParser, argv=None,
         return code
     except KeyboardInterrupt:
         out = command.out
-        where = f"; resume with --resume {out}" if out is not None and (out / "config.json").is_file() else ""
+        display = " --no-progress" if getattr(command.args, "no_progress", False) else ""
+        where = (f"; resume with --resume {shlex.quote(str(out))}{display}"
+                 if out is not None and (out / "config.json").is_file() else "")
         print(f"interrupted{where}", file=sys.stderr)
         code = 130
         return code

@@ -9,6 +9,8 @@ under every hyper-parameter flag, and is not part of the flags --config replays.
 from __future__ import annotations
 
 import argparse
+import re
+from pathlib import Path
 
 from offrl_jax.algos import ALGOS, PRESETS, SACNConfig, preset_values
 from offrl_jax.app.flags import FLAG_FIELDS, add_config_flags, config_values, run_args, sweepable_fields
@@ -137,8 +139,17 @@ def make_study(env: str, algo: str, level: str, args, extra: dict | None = None,
         reference = LABELS["none"] if "none" in args.pretrain else None
     fields = study_fields(args) | (extra or {})
     dataset = args.dataset_path or f"{env}-{level}"
-    return Study(name=name or f"{env}-{level}-{algo}", dataset=dataset, env=env, variants=variants,
+    data_name = dataset_label(args.dataset_path) if args.dataset_path else f"{env}-{level}"
+    return Study(name=name or f"{data_name}-{algo}", dataset=dataset, env=env, variants=variants,
                  reference=reference, **fields)
+
+
+def dataset_label(dataset_path: str) -> str:
+    """A user dataset's part of a study's name: the file's or folder's name without its suffix ("my-hopper.npz":
+    "my-hopper"), a Minari id with - for / ("mujoco/hopper/medium-v0": "mujoco-hopper-medium-v0")."""
+    path = Path(dataset_path)
+    name = path.stem if path.suffix in (".npz", ".hdf5", ".h5") else (path.name if path.exists() else dataset_path)
+    return re.sub(r"[^A-Za-z0-9._+=-]+", "-", name).strip("-.") or "dataset"
 
 
 def study_fields(args) -> dict:
