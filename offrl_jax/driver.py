@@ -14,6 +14,10 @@ evaluation interval, a resume, a self-ending phase's windows) does not change tr
 single run with seed i (exactly with `lax.map`; with `vmap` up to the rounding of batched matmuls, which float32 RL
 training amplifies as it does across machines: tests/test_driver.py).
 
+A chunk runs as up to `SLICES` slices of equal length (`slice_calls`), each one jitted call: the same updates, so
+the same parameters, but the caller hears of every slice (`on_slice`: a progress bar that moves within a chunk, a
+stop that comes within seconds instead of at the next evaluation).
+
 A hyper-parameter sweep (`Driver(..., sweep=("alpha", (1.0, 2.5, 10.0)))`) runs every (value, seed) pair as one
 member of the same vmapped program: the members' axis is value-major (member j * S + i = value j, seed i), each member
 gets its value as a traced hyper-parameter (`offrl_jax.algos.common.with_hparams`), and member (j, i) equals a
@@ -75,6 +79,18 @@ def seed_keys(seeds: tuple[int, ...], stream: int, index: int | None = None) -> 
 
 
 INIT, CHUNK, PHASE_START = 0, 1, 2  # key streams
+
+
+SLICES = 10  # a chunk runs as at most this many slices (one jitted call each) ...
+MIN_SLICE_CALLS = 100  # ... of at least this many update calls: shorter ones would cost dispatch and compilation
+
+
+def slice_calls(calls: int) -> int:
+    """The calls of one slice of a chunk of `calls` update calls: the largest divisor of `calls` no larger than
+    ceil(calls / SLICES) and at least MIN_SLICE_CALLS, so every slice of the chunk is the same program; `calls`
+    itself (one slice) when no such divisor exists."""
+    most = -(-calls // SLICES)
+    return next((d for d in range(most, MIN_SLICE_CALLS - 1, -1) if calls % d == 0), calls)
 
 
 def check_call_grid(phases: list[Phase], chunk_updates: int) -> None:
@@ -264,7 +280,8 @@ class Driver:
 
     def run(self, phases: list[Phase], chunk_updates: int, states: Any = None, start_update: int = 0,
             seconds: float = 0.0, ended: dict[str, int] | None = None,
-            last_metrics: dict[str, np.ndarray] | None = None) -> Iterator[Chunk]:
+            last_metrics: dict[str, np.ndarray] | None = None,
+            on_slice: Callable[[int], None] | None = None) -> Iterator[Chunk]:
         """Run `phases` in order, yielding after every `chunk_updates` updates and at every phase end.
 
         `states`/`start_update`/`seconds` resume a run from a checkpoint taken at a chunk boundary.  A phase with
@@ -272,6 +289,8 @@ class Driver:
         it has `ended=True`; the updates it did not use go to the last phase).  To resume such a run, `ended`
         gives the end update of every self-ended phase, and `last_metrics` the metrics of the window before
         `start_update` (what the last yielded chunk had), so the stopping rule sees what it would have seen.
+        `on_slice(updates)` is called after every slice of a chunk with the updates it made; what it raises (a
+        stop) ends the run there, its last chunk's states being the last ones yielded.
         """
         phases = list(phases)
         for name, end in (ended or {}).items():
@@ -302,9 +321,7 @@ class Driver:
                     n = min(n, auto.window - update % auto.window)
                 calls = max(1, n // phase.updates_per_call)
                 tic = time.perf_counter()
-                states, metrics = self._chunk_fn(phase, calls, phase_for)(states, self.data, self.run_keys,
-                                                                          jnp.int32(update), *extra)
-                metrics = self.real(to_host(metrics))  # every member's, on every process
+                states, metrics = self._run_slices(phase, calls, phase_for, states, update, extra, on_slice)
                 elapsed = time.perf_counter() - tic
                 seconds += elapsed
                 update += calls * phase.updates_per_call
@@ -320,6 +337,24 @@ class Driver:
                                 calls * phase.updates_per_call / elapsed, ended=stop)
             phase_start = phase_end
             start_update = update
+
+
+    def _run_slices(self, phase: Phase, calls: int, phase_for, states, update: int, extra: tuple,
+                    on_slice: Callable[[int], None] | None) -> tuple[Any, dict[str, np.ndarray]]:
+        """`calls` update calls from global update `update`, as slices of `slice_calls(calls)`: (states, every
+        member's metrics on the host, each the mean over the chunk, `finite` over all of it)."""
+        size = slice_calls(calls)
+        fn, parts = self._chunk_fn(phase, size, phase_for), []
+        for k in range(calls // size):
+            start = update + k * size * phase.updates_per_call
+            states, metrics = fn(states, self.data, self.run_keys, jnp.int32(start), *extra)
+            parts.append(self.real(to_host(metrics)))  # every member's, on every process
+            if on_slice is not None:
+                on_slice(size * phase.updates_per_call)
+        if len(parts) == 1:
+            return states, parts[0]
+        finite = np.logical_and.reduce([p.pop("finite") for p in parts])
+        return states, {k: np.mean([p[k] for p in parts], axis=0) for k in parts[0]} | {"finite": finite}
 
 
 def _end_phase(phases: list[Phase], index: int, end: int) -> None:

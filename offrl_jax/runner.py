@@ -137,7 +137,7 @@ class Stopped(RuntimeError):
 class _Progress:
     """The progress bar, or with `progress` off one plain line per evaluation (so a batch log shows the run as it
     goes), or with `quiet` nothing (the other processes of a multi-process run); `update`, `set_postfix_str`,
-    `write` and `close` as tqdm's."""
+    `write` and `close` as tqdm's, `status` a postfix that a batch log does not get."""
 
     def __init__(self, total: int, progress: bool, quiet: bool = False):
         self.bar = tqdm(total=total, disable=quiet or not progress, unit="upd", dynamic_ncols=True, file=sys.stderr)
@@ -147,6 +147,11 @@ class _Progress:
     def update(self, n: int) -> None:
         self.bar.update(n)
         self.done += n
+
+    def status(self, text: str) -> None:
+        """What is going on, on the bar only (not a line of a batch log)."""
+        if not self.plain:
+            self.bar.set_postfix_str(text)
 
     def set_postfix_str(self, text: str) -> None:
         if not self.plain:
@@ -227,9 +232,20 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
     last_score = {(r["variant"], r["seed"]): r["score"] for r in rows}  # resumed: a seed that had diverged stays out
     alive = np.array([math.isfinite(last_score.get((v.label, seed), 0.0)) for v, seed in member_names])
     best = _best_scores(rows)  # resumed: the best checkpoints already written
-    for chunk in driver.run(phases, study.eval_every, states, start, seconds, ended, last_metrics):
+    moved = 0  # updates of the chunk under way, shown as its slices end
+
+    def on_slice(updates: int) -> None:
+        nonlocal moved
         if recorder.stop.is_set():
-            raise Stopped(f"{name} stopped at update {start}; last checkpoint: update {last_saved}")
+            raise Stopped(f"{name} stopped at update {start + moved}; last checkpoint: update {last_saved}")
+        moved += updates
+        bar.update(updates * len(group))
+
+    bar.status(f"{name} | compiling, then {min(study.eval_every, last_update - start):,} updates to the first "
+               "evaluation")
+    for chunk in driver.run(phases, study.eval_every, states, start, seconds, ended, last_metrics, on_slice):
+        if recorder.stop.is_set():
+            raise Stopped(f"{name} stopped at update {chunk.update}; last checkpoint: update {last_saved}")
         finite = np.asarray(chunk.metrics.pop("finite"), bool)
         if not finite.all():
             newly = [f"{v.label}/seed {s}" if swept else str(s)
@@ -252,8 +268,8 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
         if chunk.ended:  # a pre-training phase ended itself here: the hand-over, recorded for the summary and resume
             for row in rows[-len(member_names):]:
                 row["phase_ended"] = 1
-        bar.update((chunk.update - start) * len(group))
-        start = chunk.update
+        bar.update((chunk.update - start - moved) * len(group))
+        start, moved = chunk.update, 0
         mean_score = float(np.nanmean(scores)) if alive.any() else float("nan")
         bar.set_postfix_str(f"{name} | {chunk.phase} | {chunk.updates_per_s:.0f} upd/s | score "
                             f"{mean_score:.1f} | eval {time.perf_counter() - tic:.1f}s")

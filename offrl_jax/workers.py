@@ -66,6 +66,9 @@ class _Bar:
     def set_postfix_str(self, text: str) -> None:
         self.conn.send(("postfix", text))
 
+    def status(self, text: str) -> None:
+        self.conn.send(("status", text))
+
     def write(self, text: str, file=None) -> None:
         self.conn.send(("write", text))
 
@@ -193,6 +196,8 @@ def run_in_processes(target: Callable, tasks: list[tuple], parallel: int, bar, r
                     bar.update(message[1])
                 elif kind == "postfix":
                     bar.set_postfix_str(message[1])
+                elif kind == "status":
+                    bar.status(message[1])
                 elif kind == "write":
                     bar.write(message[1], file=sys.stderr)
                 elif kind == "rows":

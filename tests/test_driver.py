@@ -156,3 +156,35 @@ def test_seed_of_a_batched_run_is_the_single_run_up_to_rounding_over_3000_update
     for (update, v), (_, s) in zip(vmapped, single64):
         gap = max(float(np.max(np.abs(a[1] - b[0])) / np.max(np.abs(b[0]))) for a, b in zip(v, s) if b.any())
         assert gap < 1e-12, (update, gap)
+
+
+def test_a_chunk_runs_in_slices_that_change_nothing_but_when_the_caller_hears(tiny_dataset):
+    """A chunk of 1,000 TD3+BC calls (2,000 updates) runs as 10 slices of 100 calls: the same parameters as ten
+    chunks of 200 updates, its metrics their mean, `on_slice` called after each slice; what `on_slice` raises
+    stops the run within the chunk."""
+    from offrl_jax.driver import slice_calls
+    assert [slice_calls(c) for c in (1, 200, 1000, 1250, 2477)] == [1, 200, 100, 125, 2477]
+    config = make_config("td3bc", tiny_dataset.env, pretrain="none", hidden=(32, 32))
+    algo = make_algorithm(config, tiny_dataset.obs_dim, tiny_dataset.act_dim, len(tiny_dataset))
+    data, _ = device_data(tiny_dataset, config.gamma)
+    heard = []
+    (whole,) = [(c, [np.array(x) for x in jax.tree.leaves(c.states)])
+                for c in Driver(algo, data, (0, 1), batch_size=32).run(algo.phases(2000), 2000, on_slice=heard.append)]
+    assert heard == [200] * 10
+    pieces = [(c.metrics, [np.array(x) for x in jax.tree.leaves(c.states)])
+              for c in Driver(algo, data, (0, 1), batch_size=32).run(algo.phases(2000), 200)]
+    for a, b in zip(whole[1], pieces[-1][1]):
+        np.testing.assert_array_equal(a, b)
+    for name, value in whole[0].metrics.items():
+        expected = np.all([m[name] for m, _ in pieces], axis=0) if name == "finite" else \
+            np.mean([m[name] for m, _ in pieces], axis=0)
+        np.testing.assert_allclose(value, expected, rtol=1e-6, err_msg=name)
+
+    def stop_after_three(updates):
+        heard.append(updates)
+        if len(heard) == 3:
+            raise KeyboardInterrupt
+    heard.clear()
+    with pytest.raises(KeyboardInterrupt):
+        list(Driver(algo, data, (0, 1), batch_size=32).run(algo.phases(2000), 2000, on_slice=stop_after_three))
+    assert heard == [200] * 3

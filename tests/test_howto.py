@@ -1,30 +1,68 @@
-"""docs/howto.md's first recipe as written: your own numpy arrays in an .npz with D4RL's keys, checked by
-`datasets info` and read back unchanged.  (The third recipe, load/evaluate/roll out, is tests/test_policy.py.)"""
+"""docs/howto.md as written: its first recipe (own numpy arrays -> .npz -> `datasets info` -> a quick training run)
+and its third (load, evaluate and roll out that run's policy, with a video), each code block taken from the file
+and run in a fresh folder, one after the other.  The second needs a Minari download and is not run."""
 import json
+import os
+import re
+import shlex
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 
 from offrl_jax.data.readers import load_dataset_path
 
-from .conftest import synthetic_dataset
-from .test_datasets_cli import run_cli
+HOWTO = Path(__file__).resolve().parents[1] / "docs" / "howto.md"
 
 
-def test_own_numpy_arrays_as_an_npz_with_d4rl_keys(tmp_path):
-    ds = synthetic_dataset(600, episode_len=100)
-    obs, act, rew, term, trunc = ds.observations, ds.actions, ds.rewards, ds.terminals, ds.timeouts
-    path = tmp_path / "my-hopper.npz"
-    np.savez(path, observations=obs, actions=act, rewards=rew, terminals=term, timeouts=trunc)  # as in the doc
+def recipes() -> dict[str, list[tuple[str, str]]]:
+    """{section title: [(language, code), ...]} of the file's fenced code blocks."""
+    found: dict[str, list[tuple[str, str]]] = {}
+    for section in re.split(r"^## ", HOWTO.read_text(), flags=re.M)[1:]:
+        title = section.splitlines()[0]
+        found[title] = re.findall(r"^```(\w+)\n(.*?)^```", section, flags=re.M | re.S)
+    return found
 
-    result = run_cli("info", path)
-    assert result.returncode == 0, result.stderr
-    info = json.loads(result.stdout)
-    assert (info["env"], info["transitions"], info["obs_dim"], info["act_dim"]) == ("hopper", 600, 11, 3)
-    assert info["episodes"] == len(ds.episode_returns())
 
-    back = load_dataset_path(path)
-    for name in ("observations", "actions", "rewards", "terminals", "timeouts"):
-        np.testing.assert_array_equal(getattr(back, name), getattr(ds, name))
-    inside = ~(ds.terminals.astype(bool) | ds.timeouts.astype(bool))  # no next_observations: the next row's
-    inside[-1] = False
-    np.testing.assert_array_equal(back.next_observations[inside], ds.next_observations[inside])
+def run_shell(code: str, cwd: Path) -> list[subprocess.CompletedProcess]:
+    """Each command line of a bash block as written (comments dropped), with this interpreter as `python`."""
+    done = []
+    for line in code.splitlines():
+        words = shlex.split(line, comments=True)
+        if not words:
+            continue
+        assert words[0] == "python", line
+        result = subprocess.run([sys.executable, *words[1:]], cwd=cwd, capture_output=True, text=True, timeout=600,
+                                env=os.environ | {"PYTHONWARNINGS": "ignore"})
+        assert result.returncode == 0, f"{line}\n{result.stderr[-3000:]}"
+        done.append(result)
+    return done
+
+
+def test_the_recipes_run_as_written(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    blocks = recipes()
+    (lang, make), (lang2, commands) = blocks["Train on your own numpy arrays"]
+    assert (lang, lang2) == ("python", "bash")
+    exec(make, {})
+    info, train = run_shell(commands, tmp_path)
+    facts = json.loads(info.stdout)
+    assert (facts["env"], facts["transitions"], facts["obs_dim"], facts["act_dim"]) == ("hopper", 2000, 11, 3)
+    assert facts["episodes"] == 4
+    back = load_dataset_path(tmp_path / "my-hopper.npz")
+    assert back.timeouts.sum() == 4 and not back.terminals.any()
+    run = tmp_path / "runs" / "my-hopper"
+    assert json.loads((run / "config.json").read_text())["name"] == "my-hopper-td3bc"  # named after the file
+    summary = json.loads((run / "summary.json").read_text())
+    assert [v["variant"] for v in summary] == ["pretrained", "scratch"] and summary[0]["updates"] == 1000
+    assert summary["study"] == "my-hopper-td3bc" if "study" in summary else True
+    assert {"curves.csv", "curves.png", "config.json"} <= {p.name for p in run.iterdir()}
+
+    (lang, python), (lang2, commands) = blocks["Load, evaluate and roll out a trained policy"]
+    assert (lang, lang2) == ("python", "bash")
+    exec(python, {})
+    score = float(capsys.readouterr().out.strip().splitlines()[-1])
+    assert np.isfinite(score)
+    run_shell(commands, tmp_path)
+    assert (tmp_path / "hopper.gif").stat().st_size > 0
