@@ -1,15 +1,14 @@
 """Ctrl-C in a command, at any moment: one line and exit 130, never a traceback and never lost.
 
 `quiet_start` (called by the `__init__` of each package that holds commands, so this module imports nothing heavy)
-covers the imports before a command's `main`: a Ctrl-C there ends the process at once, and an exception there (a
-JAX environment variable JAX cannot read) is one line.  `during_command` is the handler from `offrl_jax.cli.run_main`
-on: Ctrl-C raises KeyboardInterrupt, which the command handles (a training
-run stops at its next chunk boundary), except where Python would lose it or a C extension could crash on it: inside
-an import (JAX imported lazily: a half-initialised extension aborts the process or leaves an ImportError) or inside
-a callback whose exception Python prints and drops (JAX's garbage-collection callback, a weak reference's
-callback, a `__del__`).  There it is put off and tried again every 50 ms; one still put off when the command's
-`main` returns makes the command end as interrupted.
-"""
+covers the imports before a command's `main`: a Ctrl-C there ends the process at once, and an exception there (a JAX
+environment variable JAX cannot read) is one line. `during_command` is the handler from `offrl_jax.cli.run_main` on:
+Ctrl-C raises KeyboardInterrupt, which the command handles (a training run stops at the end of its current slice),
+except where Python would lose it or a C extension could crash on it: inside an import (JAX imported lazily: a half-
+initialised extension aborts the process or leaves an ImportError) or inside a callback whose exception Python
+prints and drops (JAX's garbage-collection callback, a weak reference's callback, a `__del__`). There it is put off
+and tried again every 50 ms; one still put off when the command's `main` returns makes the command end as
+interrupted."""
 from __future__ import annotations
 
 import os

@@ -113,7 +113,7 @@ def run_study(study: Study, out_dir: Path, dataset: Dataset, resume: bool = Fals
                     for future in [f for f in done if f.exception() is not None] + futures:  # a failure first
                         future.result()
                 except BaseException:
-                    recorder.stop.set()  # the other variants stop at their next chunk boundary
+                    recorder.stop.set()  # the other variants stop at the end of their current slice
                     raise
     finally:
         bar.close()
@@ -131,7 +131,7 @@ def run_study(study: Study, out_dir: Path, dataset: Dataset, resume: bool = Fals
 
 
 class Stopped(RuntimeError):
-    """Another variant failed or the run was interrupted; this one stopped at a chunk boundary."""
+    """Another variant failed or the run was interrupted; this one stopped at the end of a slice."""
 
 
 class _Progress:

@@ -8,8 +8,9 @@ not depend on where a variant runs: each variant's randomness is its own.
 A worker gets its task by pickling (the dataset included), runs `target(*task, bar, recorder)` and sends back, on
 its own pipe, what the threads used to share: rows for curves.csv, progress, messages, and its result or its
 error.  The parent owns curves.csv, the progress bar and the run directory's lock.  Workers ignore SIGINT: on
-Ctrl-C (or when a variant fails) the parent tells them to stop, and they stop at their next chunk boundary; one
-still busy after 30 s is terminated (its last checkpoint stays).  A worker whose parent is gone stops too.
+Ctrl-C (or when a variant fails) the parent tells them to stop, and they stop at the end of their current slice (a
+tenth of a chunk at most); one still busy after 30 s is terminated (its last checkpoint stays).  A worker whose
+parent is gone stops too.
 """
 from __future__ import annotations
 
@@ -157,7 +158,7 @@ def run_in_processes(target: Callable, tasks: list[tuple], parallel: int, bar, r
                      on_done: Callable[[int, Any], None]) -> None:
     """Run `target(*task, bar, recorder)` for every task, `parallel` at a time, each in a process pinned to its own
     cores; `on_done(index, result)` in the parent as each ends.  The first error tells the others to stop at their
-    next chunk boundary and is raised here once they have (Ctrl-C likewise); a worker that dies without a word
+    current slice and is raised here once they have (Ctrl-C likewise); a worker that dies without a word
     raises ChildProcessError."""
     ctx = multiprocessing.get_context("spawn")  # a fresh interpreter: JAX must not be forked
     stop = ctx.Event()
@@ -236,9 +237,10 @@ def run_in_processes(target: Callable, tasks: list[tuple], parallel: int, bar, r
             if deadline is not None and time.monotonic() > deadline:
                 for process, _, _ in running.values():
                     process.terminate()
-    except KeyboardInterrupt:  # Ctrl-C in the parent: the workers stop at their next chunk boundary
+    except KeyboardInterrupt:  # Ctrl-C in the parent: the workers stop at the end of their current slice
         fail(KeyboardInterrupt())
-        bar.write("stopping the worker processes at their next chunk boundary (Ctrl-C again: now)", file=sys.stderr)
+        bar.write("stopping the worker processes at the end of their current slice (Ctrl-C again: now)",
+                  file=sys.stderr)
         while running:
             try:
                 ready = wait([conn for _, conn, _ in running.values()], timeout=1.0)
