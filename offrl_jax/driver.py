@@ -103,8 +103,9 @@ def check_call_grid(phases: list[Phase], chunk_updates: int) -> None:
                              f"evaluation interval ({chunk_updates}) must be a multiple of that window")
         k = p.updates_per_call
         if k > 1 and (start % k or p.steps % k or chunk_updates % k):
-            raise ValueError(f"phase '{p.name}' makes {k} updates per call, so its start ({start}), its length "
-                             f"({p.steps}) and the evaluation interval ({chunk_updates}) must be multiples of {k}")
+            raise ValueError(f"phase '{p.name}' updates the actor once every {k} critic updates (the policy delay), so "
+                             f"the updates before it ({start}), the updates up to its end ({start + p.steps}) and the "
+                             f"evaluation interval ({chunk_updates}) must be multiples of {k}")
         start += p.steps
 
 
