@@ -10,8 +10,8 @@ study writes anything, `check_resume` reads every group's checkpoint and refuses
   checked this way only),
 - is past the study's budget or holds rows of variants that are not its own;
 
-and reports a variant that has evaluations in curves.csv but no checkpoint (it starts again from update 0: its rows
-are made again, identically, from the same seeds).
+and refuses a variant that has evaluations in curves.csv but no checkpoint (resuming would drop them: restore the
+checkpoint, or start a new run with --config), and a config.json whose resolved configs were edited.
 """
 from __future__ import annotations
 
