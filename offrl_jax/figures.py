@@ -17,7 +17,7 @@ from offrl_jax.checkpoint import atomic_write_bytes
 from offrl_jax.results import all_nan_expected, iqm_band, read_curves, score_matrix
 
 ALGO_NAMES = {"td3bc": "TD3+BC", "edac": "EDAC", "td3bc_cql": "TD3+BC+CQL", "edac_bc": "EDAC+BC", "bc": "BC",
-              "cql": "CQL", "sacn": "SAC-N"}
+              "cql": "CQL", "sacn": "SAC-N", "iql": "IQL", "rebrac": "ReBRAC"}
 
 
 @functools.cache
