@@ -1,6 +1,6 @@
 """Appendix C: ablation of actor and critic pre-training — actor-only vs critic-only vs actor+critic vs none.
 
-Default (sized for a 2-core CPU, as run for RESULTS.md): TD3+BC on hopper-medium, 3 vmapped seeds, 30k updates per
+Default (sized for a 2-core CPU, as run for RESULTS.md): TD3+BC on hopper-medium, 3 seeds, 30k updates per
 variant, evaluation every 2.5k (4 variants: ~40 min on 2 cores).  The paper: 1M updates.
 
     python -m experiments.ablation [--env walker2d] [--algo edac] [--updates N]

@@ -2,7 +2,7 @@
 the paper, ReBRAC and IQL with `--algos rebrac iql`: TD3+BC's budget, ReBRAC at its published batch of 1024 unless
 --batch-size sets another than the default 256).
 
-CPU-sized defaults (the paper runs 1M updates on a GPU), 3 vmapped seeds: TD3+BC 30k updates (10k pre-training),
+CPU-sized defaults (the paper runs 1M updates on a GPU), 3 seeds: TD3+BC 30k updates (10k pre-training),
 evaluation every 2.5k (~25 min per env on 2 cores); EDAC with 10 critics for 16k updates (12k pre-training: 3k soft
 BC + 9k soft-return critic; `--pretrain-updates` / `--actor-pretrain-fraction` change it), evaluation every 1k.
 EDAC's 10-critic updates are what bound its budget: measured with 2 seeds on one core (2026-11-22, hopper), soft BC

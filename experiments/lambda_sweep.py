@@ -1,7 +1,7 @@
 """Appendix D: the TD weight lambda in critic pre-training, lambda in {0, 0.1, 0.5, 1}, plus no pre-training.
 
 Default (sized for a 2-core CPU): TD3+BC on halfcheetah-medium (where the paper finds lambda > 0 smooths the
-hand-over), 3 vmapped seeds, 20k updates per variant (10k pre-training), evaluation every 2k: 5 variants, ~45 min
+hand-over), 3 seeds, 20k updates per variant (10k pre-training), evaluation every 2k: 5 variants, ~45 min
 on one core.  The paper: 1M updates.  `--lambda-mode target` uses eq. 5 target mixing instead of the authors' loss
 mixing.
 

@@ -1,6 +1,6 @@
 """Appendix B: LayerNorm in the actor only / critic only / both / neither (TD3+BC, no pre-training).
 
-Default (sized for a 2-core CPU): TD3+BC on hopper-medium and halfcheetah-medium, 3 vmapped seeds, 20k updates per
+Default (sized for a 2-core CPU): TD3+BC on hopper-medium and halfcheetah-medium, 3 seeds, 20k updates per
 variant, evaluation every 2k (8 runs in all: ~1 hour on 2 cores; pass --env to run one env).  The paper: 1M updates.
 
     python -m experiments.layernorm [--env hopper] [--updates N]

@@ -2,7 +2,7 @@
 
 These datasets come from the SAC training runs (`python -m offrl_jax.datasets generate hopper-medium-replay`
 trains SAC to the medium checkpoint first if it has not been run).  Default (sized for a 2-core CPU): hopper
-medium-replay, 3 vmapped seeds, 30k updates per variant, evaluation every 2.5k.  full-replay is every transition of
+medium-replay, 3 seeds, 30k updates per variant, evaluation every 2.5k.  full-replay is every transition of
 the 1M-step SAC run that produced the shipped `<env>-expert` checkpoint: it needs that checkpoint, and reads the run
 from the cache (or trains it first: hours on a CPU).
 

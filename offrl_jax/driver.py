@@ -19,7 +19,7 @@ the same parameters, but the caller hears of every slice (`on_slice`: a progress
 stop that comes within seconds instead of at the next evaluation).
 
 A hyper-parameter sweep (`Driver(..., sweep=("alpha", (1.0, 2.5, 10.0)))`) runs every (value, seed) pair as one
-member of the same vmapped program: the members' axis is value-major (member j * S + i = value j, seed i), each member
+member of the same program: the members' axis is value-major (member j * S + i = value j, seed i), each member
 gets its value as a traced hyper-parameter (`offrl_jax.algos.common.with_hparams`), and member (j, i) equals a
 single run with seed i and value j.
 """

@@ -1,5 +1,6 @@
-"""Run a study: several variants (algorithm + hyper-parameters) on one dataset, each with S vmapped seeds, evaluated
-between scan chunks, with atomic results, checkpoints every N updates, `resume`, and a clean stop on divergence.
+"""Run a study: several variants (algorithm + hyper-parameters) on one dataset, each with S seeds in one program,
+evaluated between scan chunks, with atomic results, checkpoints every N updates, `resume`, and a clean stop on
+divergence.
 
 Output directory:
     config.json      the study (enough to resume or replay it), every variant's resolved config ("resolved": every
@@ -55,7 +56,7 @@ def run_study(study: Study, out_dir: Path, dataset: Dataset, resume: bool = Fals
               data_sha256: str | None = None, verify: bool = True) -> list[dict]:
     """Run (or resume) every variant; write results as it goes; return the summary.
 
-    Variants that differ only in one sweepable hyper-parameter (`sweep_groups`) train as one vmapped program unless
+    Variants that differ only in one sweepable hyper-parameter (`sweep_groups`) train as one program unless
     `study.vmap_sweeps` is off. `parallel` > 1 runs that many variants (or groups) at once. On the CPU they run in
     worker processes pinned to their own cores (`offrl_jax.workers`, 10-20 % faster than threads on 2 cores);
     elsewhere (one GPU), or with `processes=False`, in threads of this process (a jitted chunk releases the GIL).
@@ -194,7 +195,7 @@ class _Recorder:
 
 def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: Dataset, data_sha256: str,
                out_dir: Path, resume: bool, bar, recorder: _Recorder) -> int:
-    """Train one variant (S vmapped seeds), or a sweep group (values x seeds in one vmapped program), evaluating
+    """Train one variant (S seeds in one program), or a sweep group (values x seeds in one program), evaluating
     between chunks; returns the number of pre-training updates."""
     first_variant, labels, seeds = group[0], [v.label for v in group], study.seeds
     config = study.config(first_variant.label)

@@ -2,7 +2,7 @@
 
 A `Study` is plain data with its JSON (`config.json`): `to_json`/`from_json` for the study itself, `record_json`
 adding every variant's resolved config and the run records (`offrl_jax.provenance`).  `sweep_groups` finds the
-variants that can train as one vmapped program.
+variants that can train as one program.
 """
 from __future__ import annotations
 
@@ -70,7 +70,7 @@ class Study:
     reference: str | None = None  # label of the from-scratch variant whose final score is the asymptote (None: no
     # asymptote, and no updates/seconds to 90 %)
     final_window: tuple[int, int] | None = None  # final score = mean of evaluations in [lo, hi] (Adroit protocol)
-    vmap_sweeps: bool = True  # variants differing only in one sweepable value (e.g. alpha) share one vmapped program
+    vmap_sweeps: bool = True  # variants differing only in one sweepable value (e.g. alpha) share one program
 
     def __post_init__(self):
         for name in ("variants", "seeds", "final_window"):  # JSON's lists, stored as tuples (hashable, comparable)
@@ -205,7 +205,7 @@ def reference_label(study: Study, label: str) -> str | None:
 
 def sweep_groups(variants: tuple[Variant, ...]) -> list[tuple[tuple[Variant, ...], str | None]]:
     """Variants of one algorithm whose overrides differ only in one sweepable hyper-parameter (`SWEEPABLE`, e.g.
-    TD3+BC's alpha) run as one vmapped program: [(variants, swept name or None)], in study order of first member."""
+    TD3+BC's alpha) run as one program: [(variants, swept name or None)], in study order of first member."""
     groups: list[list] = []  # [[variants], swept name or None]
     for v in variants:
         for group in groups:

@@ -1,4 +1,4 @@
-"""The driver end to end: phases chained, S vmapped seeds, seed i of a vmapped run == a single run with seed i."""
+"""The driver end to end: phases chained, S seeds in one program, seed i of the program == a single run with seed i."""
 import jax
 import jax.numpy as jnp
 import numpy as np

@@ -8,7 +8,7 @@ line in a config class: it reaches the command line, `config.json` and the losse
 
     bool                      --name / --no-name
     int, float                a number (floats must be finite); a field in the config's SWEEPABLE takes several
-                              values, a sweep trained as one vmapped program
+                              values, a sweep trained as one program
     tuple[int, ...]           one or more widths
     tuple[float, float]       two numbers
     Literal[...]              one of the choices

@@ -111,7 +111,7 @@ def chosen(args) -> dict:
 
 def sweep_variants(label: str, algo: str, fixed: dict) -> tuple[Variant, ...]:
     """One variant, or one per value of a swept flag (labels "pretrained alpha=2.5", ...); the runner trains a
-    sweep's variants as one vmapped program.  A "preset" entry of `fixed` is expanded into its values for `algo`
+    sweep's variants as one program.  A "preset" entry of `fixed` is expanded into its values for `algo`
     (every value is then recorded in the variant), under the other entries."""
     fixed = dict(fixed)
     fixed = preset_values(fixed.pop("preset", None), algo) | fixed
