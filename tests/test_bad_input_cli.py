@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.entry import run_module
 from tests.test_datasets_cli import assert_cli_error, run_cli
 from tests.test_readers import d4rl_arrays, write_h5, write_npz
 
@@ -98,13 +99,10 @@ def test_experiment_cli_rejects_dims_that_do_not_match_the_chosen_env(tmp_path):
 
 # ------------------------------------------------------------------------------------ every secondary entry point
 def _one_line_error(module: str, *args: str, cwd=None):
-    import subprocess
-    import sys
     from pathlib import Path
 
     root = Path(__file__).resolve().parents[1]
-    result = subprocess.run([sys.executable, "-m", module, *args], cwd=cwd or root, capture_output=True, text=True,
-                            timeout=300)
+    result = run_module(module, *args, cwd=cwd or root)
     lines = result.stderr.strip().splitlines()
     assert result.returncode == 2, result.stderr
     assert "Traceback" not in result.stderr and lines and lines[-1].startswith("error:"), result.stderr
@@ -166,10 +164,8 @@ def test_entry_point_refuses_bad_values_in_one_line(module, args, message):
     ("experiments.report", ["/tmp/a\nb"]),
 ])
 def test_a_newline_in_a_path_stays_on_the_one_error_line(module, args):
-    import subprocess
-    import sys
 
-    result = subprocess.run([sys.executable, "-m", module, *args], capture_output=True, text=True, timeout=300)
+    result = run_module(module, *args)
     assert result.returncode == 2 and result.stderr.count("\n") == 1, result.stderr
     assert result.stderr.startswith("error: ") and "a\\nb" in result.stderr, result.stderr
 

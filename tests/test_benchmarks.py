@@ -5,6 +5,7 @@ import pytest
 
 from benchmarks.flops import eval_flops, mlp_dims, update_flops
 from offrl_jax.algos import make_config
+from tests.entry import run_module
 
 KEYS = {"algo", "phase", "seeds", "updates_per_s", "compile_s", "gflop_per_update", "achieved_gflops", "peak_gflops",
         "pct_of_peak"}
@@ -281,14 +282,10 @@ def test_benchmark_refuses_a_bad_number_in_one_line(capsys, module, args, flag):
     ("torch_reference", ["--threads", "-1"]),
 ])
 def test_benchmark_command_bad_number_is_one_line_and_exit_2(tmp_path, module, args):
-    import subprocess
-    import sys
-    from pathlib import Path
 
     if module == "torch_reference":
         pytest.importorskip("torch")
-    result = subprocess.run([sys.executable, "-m", f"benchmarks.{module}", *args], capture_output=True, text=True,
-                            timeout=300, cwd=Path(__file__).resolve().parents[1])
+    result = run_module(f"benchmarks.{module}", *args)
     assert result.returncode == 2 and result.stderr.count("\n") == 1, result.stderr
     assert result.stderr.startswith("error: ") and not result.stdout
 

@@ -16,14 +16,13 @@ import pytest
 
 from offrl_jax import datasets
 from offrl_jax.data.dataset import DatasetError
+from tests.entry import run_module
 
 REPO = Path(__file__).resolve().parents[1]
 
 
 def run_cli(*args, env=None):
-    full_env = {**os.environ, **(env or {})}
-    return subprocess.run([sys.executable, "-m", "offrl_jax.datasets", *map(str, args)], cwd=REPO, env=full_env,
-                          capture_output=True, text=True, timeout=120)
+    return run_module("offrl_jax.datasets", *args, cwd=REPO, timeout=120, env=env)
 
 
 def assert_cli_error(result, *fragments):

@@ -4,11 +4,11 @@ comments and docstrings, or any --help."""
 from __future__ import annotations
 
 import re
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
+
+from tests.entry import run_module
 
 ROOT = Path(__file__).resolve().parents[1]
 PROCESS_WORDS = re.compile(r"\bsessions?\b|\bissues? ?#?\d+|\b(?:this|last|next) week\b|\bwork periods?\b|"
@@ -28,8 +28,7 @@ def test_user_facing_text_has_no_process_words():
 @pytest.mark.parametrize("module", ["experiments.mujoco_medium", "experiments.figure2", "experiments.report",
                                     "offrl_jax.rollout", "offrl_jax.datasets", "benchmarks.throughput"])
 def test_help_has_no_process_words(module):
-    result = subprocess.run([sys.executable, "-m", module, "--help"], cwd=ROOT, capture_output=True, text=True,
-                            timeout=120)
+    result = run_module(module, "--help", timeout=120)
     assert result.returncode == 0 and result.stdout.strip()
     assert not PROCESS_WORDS.search(result.stdout), [line for line in result.stdout.splitlines()
                                                      if PROCESS_WORDS.search(line)]

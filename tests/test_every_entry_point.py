@@ -1,11 +1,11 @@
 """Every entry point, four kinds of bad input: a bad number, a non-finite number, a missing file, an unwritable
 output.  Each is one `error:` line, exit 2, no traceback, and nothing written.  A command that has no input of a
 kind (no number, no file to read, nothing it writes) has no case of it."""
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
+
+from tests.entry import run_module
 
 ROOT = Path(__file__).resolve().parents[1]
 EXPERIMENT = ["--updates", "20000"]  # a valid budget, so that the bad value is what fails
@@ -101,8 +101,7 @@ def test_every_entry_point_refuses_bad_input_in_one_line(tmp_path, module, kind)
     args, fragment = CASES[module][kind]
     (tmp_path / "f").write_text("a plain file")
     args = [a.format(f=tmp_path / "f", tmp=tmp_path) for a in args]
-    result = subprocess.run([sys.executable, "-m", module, *args], cwd=ROOT, capture_output=True, text=True,
-                            timeout=300)
+    result = run_module(module, *args)
     lines = result.stderr.strip().splitlines()
     assert result.returncode == 2, result.stderr
     assert "Traceback" not in result.stderr and lines and lines[-1].startswith("error: "), result.stderr

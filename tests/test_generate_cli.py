@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from offrl_jax.data.generate import sac, ship
+from tests.entry import run_module
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -21,8 +22,7 @@ def tree(path: Path) -> dict[str, bytes | None]:
 
 def command(module: str, *args: str) -> str:
     """The one error line of a command that must refuse its input."""
-    result = subprocess.run([sys.executable, "-m", module, *map(str, args)], cwd=ROOT, capture_output=True, text=True,
-                            timeout=300)
+    result = run_module(module, *args)
     lines = result.stderr.strip().splitlines()
     assert result.returncode == 2, result.stderr
     assert len(lines) == 1 and lines[0].startswith("error: "), result.stderr

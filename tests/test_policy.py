@@ -13,6 +13,7 @@ from offrl_jax.policy import load_exported, load_policy
 from offrl_jax.rollout import rollout
 from offrl_jax.runner import run_study
 from offrl_jax.study import Study, Variant
+from tests.entry import run_module
 
 from .conftest import synthetic_dataset
 
@@ -157,8 +158,7 @@ def test_rollout_refuses_bad_input_in_one_line(run, tmp_path):
     for args, message in [([str(tmp_path / "none")], "not a saved run"),
                           ([str(run), "--video", str(tmp_path / "x.avi")], "must end in .mp4 or .gif"),
                           ([str(run), "--episodes", "0"], "positive integer")]:
-        result = subprocess.run([sys.executable, "-m", "offrl_jax.rollout", *args], cwd=ROOT, capture_output=True,
-                                text=True, timeout=300)
+        result = run_module("offrl_jax.rollout", *args)
         assert result.returncode == 2 and result.stderr.strip().splitlines()[-1].startswith("error:")
         assert message in result.stderr and "Traceback" not in result.stderr
 
