@@ -65,7 +65,7 @@ def test_driver_refuses_an_evaluation_grid_off_the_delayed_update():
 
     step = lambda *a: a  # noqa: E731  (never called)
     check_call_grid([Phase("pretrain", step, 1000), Phase("offline_rl", step, 2000, updates_per_call=2)], 500)
-    with pytest.raises(ValueError, match="start \\(1001\\)"):
+    with pytest.raises(ValueError, match="the updates before it \\(1001\\)"):
         check_call_grid([Phase("pretrain", step, 1001), Phase("offline_rl", step, 2000, updates_per_call=2)], 500)
     with pytest.raises(ValueError, match="evaluation interval \\(501\\)"):
         check_call_grid([Phase("offline_rl", step, 2000, updates_per_call=2)], 501)

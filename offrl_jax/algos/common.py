@@ -33,6 +33,8 @@ import numpy as np
 import optax
 from flax import struct
 
+from offrl_jax import losses as L
+
 Params = Any
 Batch = dict[str, jax.Array]
 Metrics = dict[str, jax.Array]
@@ -97,6 +99,18 @@ class AutoStop:
             if not np.all((prev - cur) < self.tol * np.abs(prev)):
                 return False
         return True
+
+
+def bc_step(actor: Model, apply: Callable, tx: optax.GradientTransformation, batch: Batch,
+            tau: float | None) -> tuple[Model, Metrics]:
+    """One behaviour-cloning step of a deterministic actor (`apply(params, obs)`, MSE to the data's actions), its
+    target moved by `tau` (None: left where it is)."""
+    def loss_fn(params):
+        loss = L.bc_loss(apply(params, batch["observations"]), batch["actions"])
+        return loss, {"bc_loss": loss}
+
+    actor, metrics = gradient_step(actor, tx, loss_fn)
+    return (actor if tau is None else polyak(actor, tau)), metrics
 
 
 def with_hparams(algo: Any, **values: Any) -> Any:

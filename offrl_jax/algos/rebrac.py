@@ -28,6 +28,7 @@ from offrl_jax.algos.common import (
     Batch,
     Model,
     Phase,
+    bc_step,
     done_flags,
     first,
     gradient_step,
@@ -129,12 +130,8 @@ class ReBRAC:
         return loss, {"actor_loss": loss, "bc_mse": L.bc_loss(pi, batch["actions"])}
 
     def bc_update(self, state: ReBRACState, batch: Batch, key: jax.Array):
-        def loss_fn(params):
-            loss = L.bc_loss(self.actor.apply(params, batch["observations"]), batch["actions"])
-            return loss, {"bc_loss": loss}
-
-        actor, metrics = gradient_step(state.actor, self.actor_tx, loss_fn)
-        return state.replace(actor=polyak(actor, self.cfg.tau)), metrics
+        actor, metrics = bc_step(state.actor, self.actor.apply, self.actor_tx, batch, self.cfg.tau)
+        return state.replace(actor=actor), metrics
 
     def mc_update(self, state: ReBRACState, batch: Batch, key: jax.Array):
         critic, metrics = gradient_step(state.critic, self.critic_tx, self.critic_loss, state, batch, key, True)

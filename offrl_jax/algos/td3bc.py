@@ -23,6 +23,7 @@ from offrl_jax.algos.common import (
     Batch,
     Model,
     Phase,
+    bc_step,
     done_flags,
     first,
     gradient_step,
@@ -155,14 +156,10 @@ class TD3BC:
 
     # --------------------------------------------------------------------------------------- update functions
     def bc_update(self, state: TD3BCState, batch: Batch, key: jax.Array):
-        def loss_fn(params):
-            loss = L.bc_loss(self.actor.apply(params, batch["observations"]), batch["actions"])
-            return loss, {"bc_loss": loss}
-
-        actor, metrics = gradient_step(state.actor, self.actor_tx, loss_fn)
-        if self.cfg.pretrain == "actor" and not self.cfg.bc_target_updates:
-            return state.replace(actor=actor), metrics
-        return state.replace(actor=polyak(actor, self.cfg.tau)), metrics
+        frozen_target = self.cfg.pretrain == "actor" and not self.cfg.bc_target_updates
+        actor, metrics = bc_step(state.actor, self.actor.apply, self.actor_tx, batch, None if frozen_target else
+                                 self.cfg.tau)
+        return state.replace(actor=actor), metrics
 
     def mc_update(self, state: TD3BCState, batch: Batch, key: jax.Array):
         critic, metrics = gradient_step(state.critic, self.critic_tx, self.critic_loss, state, batch, key, True)
