@@ -11,6 +11,7 @@ import h5py
 import pytest
 
 from tests.conftest import synthetic_dataset
+from tests.entry import run_module
 
 ROOT = Path(__file__).resolve().parents[1]
 TINY = ["--updates", "400", "--eval-every", "100", "--pretrain-updates", "200", "--eval-episodes", "1",
@@ -27,9 +28,12 @@ def tiny_hdf5(tmp_path_factory) -> Path:
     return path
 
 
-def cli(*args, check=False, **kw):
-    return subprocess.run([sys.executable, "-m", "experiments.mujoco_medium", *map(str, args)], cwd=ROOT,
-                          capture_output=True, text=True, check=check, **kw)
+def cli(*args, check=False, timeout=300, env=None):
+    """The main job's command, run as `python -m` (through `tests.entry`); `check` raises on a non-zero exit."""
+    result = run_module("experiments.mujoco_medium", *args, timeout=timeout, env=env)
+    if check:
+        result.check_returncode()
+    return result
 
 
 def curves_without_time(path: Path) -> list[dict]:
@@ -258,7 +262,7 @@ def test_config_replays_a_saved_run_and_resume_refuses_other_settings(tmp_path, 
 def test_debug_variable_shows_the_traceback(tmp_path):
     result = cli("--lam", "1.5", "--out", tmp_path / "x", timeout=120)
     assert result.returncode == 2 and "Traceback" not in result.stderr
-    result = cli("--lam", "1.5", "--out", tmp_path / "x", timeout=120, env=os.environ | {"OFFRL_JAX_DEBUG": "1"})
+    result = cli("--lam", "1.5", "--out", tmp_path / "x", timeout=120, env={"OFFRL_JAX_DEBUG": "1"})
     assert result.returncode != 0 and "Traceback" in result.stderr and "lam = 1.5" in result.stderr
 
 
