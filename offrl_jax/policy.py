@@ -81,17 +81,27 @@ class Policy:
 
 def load_exported(path: str | Path) -> Callable[[np.ndarray], np.ndarray]:
     """An exported policy as `act(obs)`: (B, obs_dim) -> (B, act_dim), or one (obs_dim,) observation -> (act_dim,),
-    as the loaded policy takes them; needs only JAX.  Another shape is refused in one line (ValueError)."""
+    as the loaded policy takes them; needs only JAX.  Another shape, a non-finite observation, and a file that is
+    not an exported policy are refused in one line (ValueError)."""
     from jax import export
 
-    exported = export.deserialize(bytearray(Path(path).read_bytes()))
-    obs_dim = exported.in_avals[0].shape[-1]
+    try:
+        exported = export.deserialize(bytearray(Path(path).read_bytes()))
+        obs_dim = exported.in_avals[0].shape[-1]
+    except OSError as e:
+        raise ValueError(f"{path}: cannot be read ({e.strerror or type(e).__name__})") from None
+    except Exception as e:  # noqa: BLE001 -- whatever the deserializer raises on foreign bytes, one line
+        raise ValueError(f"{path}: not an exported policy ({type(e).__name__})") from None
 
     def act(obs) -> np.ndarray:
-        obs = jnp.asarray(obs, jnp.float32)
+        obs = np.asarray(obs, np.float32)
         if obs.ndim not in (1, 2) or obs.shape[-1] != obs_dim:
             raise ValueError(f"observations of shape {tuple(obs.shape)}: expected ({obs_dim},) or (B, {obs_dim})")
-        actions = np.asarray(exported.call(obs[None] if obs.ndim == 1 else obs))
+        if not np.isfinite(obs).all():
+            raise ValueError("observations must be finite (NaN or inf given)")
+        if obs.ndim == 2 and obs.shape[0] == 0:
+            return np.zeros((0, exported.out_avals[0].shape[-1]), np.float32)
+        actions = np.asarray(exported.call(jnp.asarray(obs[None] if obs.ndim == 1 else obs)))
         return actions[0] if obs.ndim == 1 else actions
 
     return act

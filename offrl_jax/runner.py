@@ -275,7 +275,8 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
         bar.set_postfix_str(f"{name} | {chunk.phase} | {chunk.updates_per_s:.0f} upd/s | score "
                             f"{mean_score:.1f} | eval {time.perf_counter() - tic:.1f}s")
         # checkpoints go on after a partial divergence: on resume the diverged seeds' NaN scores keep them out
-        if chunk.update - last_saved >= every or chunk.update == last_update:
+        # the first evaluation too: a variant with rows in curves.csv always has a checkpoint to resume from
+        if chunk.update - last_saved >= every or chunk.update == last_update or not ckpt_path.exists():
             if writer:
                 save_checkpoint(ckpt_path, host_states, chunk.update, chunk.seconds, rows, meta)
                 if study.keep_checkpoints:

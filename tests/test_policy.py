@@ -121,6 +121,15 @@ def test_the_export_acts_like_the_policy_without_training_code(run, tmp_path):
     np.testing.assert_allclose(act(obs[0]), policy(obs[0]), rtol=1e-6, atol=1e-6)  # one observation, as the policy
     with pytest.raises(ValueError, match=r"observations of shape \(7, 12\): expected \(11,\) or \(B, 11\)"):
         act(np.zeros((7, 12)))
+    with pytest.raises(ValueError, match="must be finite"):
+        act(np.full(11, np.nan))
+    assert act(np.zeros((0, 11))).shape == (0, 3)
+    for name, data in (("garbage", b"not an export"), ("half", path.read_bytes()[:200])):
+        (tmp_path / name).write_bytes(data)
+        with pytest.raises(ValueError, match=f"{name}: not an exported policy"):
+            load_exported(tmp_path / name)
+    with pytest.raises(ValueError, match="none.jaxexport: cannot be read"):
+        load_exported(tmp_path / "none.jaxexport")
 
 
 @pytest.mark.parametrize("args, message", [

@@ -227,3 +227,27 @@ def test_a_checkpoint_path_that_is_not_a_file_is_refused_before_anything(half_ru
     with pytest.raises(ResumeMismatch, match="not a (checkpoint file|directory); nothing was changed"):
         run_study(tiny_study(), run, synthetic_dataset(), resume=True, progress=False)
     assert {p: p.read_bytes() for p in run.rglob("*") if p.is_file()} == before
+
+
+def test_a_run_stopped_after_its_first_evaluation_has_a_checkpoint_to_resume_from(tmp_path, monkeypatch):
+    """The first evaluation (here the hand-over at 100, off the 200-update checkpoint grid) writes a checkpoint
+    along with its rows, so a stop right after it leaves a run that resumes instead of one refused for rows
+    without a checkpoint."""
+    from offrl_jax import runner
+    from offrl_jax.resume import check_resume
+
+    study = tiny_study(updates=400, eval_every=100, checkpoint_every=400,
+                       variants=(Variant.of("pretrained", "td3bc", pretrain_updates=100, hidden=(32, 32)),))
+    set_rows = runner._Recorder.set
+
+    def stop_after_first(self, rows_by_label):
+        set_rows(self, rows_by_label)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(runner._Recorder, "set", stop_after_first)
+    ds = synthetic_dataset()
+    with pytest.raises(KeyboardInterrupt):
+        run_study(study, tmp_path / "run", ds, progress=False)
+    assert (tmp_path / "run" / "checkpoints" / "pretrained.msgpack").is_file()
+    from offrl_jax.provenance import fingerprint
+    check_resume(study, tmp_path / "run", ds, fingerprint(ds))  # raises if it would be refused

@@ -31,6 +31,7 @@ from offrl_jax.app.outputs import output_dir, saved_studies, studies_json
 from offrl_jax.checkpoint import atomic_write_text
 from offrl_jax.cli import UsageError, check_writable_dir, lock_run_dir, one_line_warnings, print_error
 from offrl_jax.data.dataset import DatasetError
+from offrl_jax.interrupts import exit_code
 from offrl_jax.provenance import fingerprint
 from offrl_jax.resume import check_resume
 from offrl_jax.runner import Diverged, run_study
@@ -297,10 +298,10 @@ def run_command(build: Build, parser: argparse.ArgumentParser, argv=None,
         return code
     finally:
         failed = command.clean_up(ok)
-        if command.local is not None and not ok:  # leave now: JAX's exit handler would wait for the processes
+        if not ok:  # leave now: JAX's exit handlers would wait for worker processes or tear down a computation
             sys.stdout.flush()
             sys.stderr.flush()
-            os._exit(code)
+            os._exit(exit_code(code))  # 143 for a SIGTERM's interruption
     if failed is not None:
         print_error(failed)
         return 2
