@@ -145,16 +145,24 @@ def main(argv=None) -> int:
     p.add_argument("--no-reference", action="store_true",
                    help="no behaviour-data score: no such threshold for a run that did not record it, no line in "
                         "--plot (finding it loads each cached dataset once)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="let --plot / --aggregate replace figures that exist (their .png and .pdf)")
     args = p.parse_args(argv)
     try:
+        seen = [d.resolve() for d in args.dirs]
+        if len(set(seen)) < len(seen):
+            twice = next(d for d, r in zip(args.dirs, seen) if seen.count(r) > 1)
+            raise ValueError(f"{twice} is given twice (a study counts once)")
         if args.overlay and args.plot is None:
             raise ValueError("--overlay draws into the figure of --plot FIG.png; give --plot too")
         for flag, fig in (("--plot", args.plot), ("--aggregate", args.aggregate)):
             if fig is not None:
                 if fig.suffix.lower() != ".png":
                     raise ValueError(f"{flag} {fig}: the name must end in .png")
-                check_writable_file(fig)
-                check_writable_file(fig.with_suffix(".pdf"))
+                for path in (fig, fig.with_suffix(".pdf")):
+                    if path.exists() and not args.overwrite:
+                        raise FileExistsError(f"{flag}: {path} exists; pass --overwrite to replace it")
+                    check_writable_file(path)
         if args.merge:
             if args.merge.is_dir() and any(args.merge.iterdir()):
                 what = "already holds a run" if (args.merge / "config.json").exists() else "is not empty"

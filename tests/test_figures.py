@@ -51,3 +51,19 @@ def test_plot_refuses_a_name_that_is_not_a_png(tmp_path, capsys):
 
     assert report.main([str(RUNS[0]), "--plot", str(tmp_path / "x.jpg")]) == 2
     assert "must end in .png" in capsys.readouterr().err
+
+
+def test_report_replaces_no_figure_and_counts_a_study_once(tmp_path, capsys):
+    """An existing --plot figure (or its .pdf) is refused, untouched, unless --overwrite; a run given twice too."""
+    from experiments import report
+
+    for name in ("mine.png", "theirs.pdf"):
+        (tmp_path / name).write_text("keep me")
+    for fig in ("mine.png", "theirs.png"):
+        assert report.main([str(RUNS[0]), "--plot", str(tmp_path / fig), "--no-reference"]) == 2
+        assert "exists; pass --overwrite" in capsys.readouterr().err
+    assert {p.name: p.read_text() for p in tmp_path.iterdir()} == {"mine.png": "keep me", "theirs.pdf": "keep me"}
+    assert report.main([str(RUNS[0]), str(RUNS[0]) + "/", "--no-reference"]) == 2
+    assert "is given twice" in capsys.readouterr().err
+    assert report.main([str(RUNS[0]), "--plot", str(tmp_path / "mine.png"), "--no-reference", "--overwrite"]) == 0
+    assert (tmp_path / "mine.png").read_bytes()[:4] == b"\x89PNG"
