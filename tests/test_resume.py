@@ -152,6 +152,11 @@ def test_an_edited_resolved_config_is_refused(half_run, tmp_path):
     with pytest.raises(ResumeMismatch, match=f"resolved configs are not what its variants give \\({label}.gamma "
                                              "0.95 -> 0.99"):
         run_study(tiny_study(), run, synthetic_dataset(), resume=True, progress=False)
+    # and as --config FILE: a replay would not read it, so it is refused too, writing nothing
+    from tests.entry import run_module
+    result = run_module("experiments.mujoco_medium", "--config", run / "config.json", "--out", tmp_path / "again")
+    assert result.returncode == 2 and f"{label}.gamma 0.95 -> 0.99" in result.stderr, result.stderr
+    assert not (tmp_path / "again").exists()
 
 
 def test_a_config_field_added_since_is_no_difference_at_its_default():

@@ -33,7 +33,7 @@ from offrl_jax.cli import UsageError, check_writable_dir, lock_run_dir, one_line
 from offrl_jax.data.dataset import DatasetError
 from offrl_jax.interrupts import exit_code
 from offrl_jax.provenance import fingerprint
-from offrl_jax.resume import check_resume
+from offrl_jax.resume import check_resume, resolved_differences
 from offrl_jax.runner import Diverged, run_study
 from offrl_jax.study import Study, Variant
 from offrl_jax.summary import print_table
@@ -161,7 +161,14 @@ class Command:
                                  "given with it")
             typed = {k: v for k, v in hparams(args).items() if v is not None} if hparams else {}
             path = args.config / "config.json" if args.config.is_dir() else args.config
-            self.built = replay(saved_studies(path.parent, path), args, given, typed)
+            saved = saved_studies(path.parent, path)
+            for study in saved if isinstance(saved, list) else [saved]:  # an edited `resolved` is not read: refuse
+                own = path.parent / study.name / "config.json" if isinstance(saved, list) else path
+                if own.is_file() and (differ := resolved_differences(study, own)):
+                    raise UsageError(f"{own}: its resolved configs are not what its variants give "
+                                     f"({'; '.join(differ[:3])}); the `resolved` section is a record, not read: "
+                                     f"change a value with its flag (--config {path} --FLAG VALUE)")
+            self.built = replay(saved, args, given, typed)
         elif not self.resuming:
             self.built = build(args)  # validates every hyper-parameter and budget
 
