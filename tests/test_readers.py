@@ -253,6 +253,18 @@ def write_npz(path, T=30, lengths=(10, 20), **overrides):
     return path
 
 
+@pytest.mark.parametrize("lengths, shown", [((10.5, 19.5), "10.5 at index 0"), ((1e30, 30), "1e+30 at index 0"),
+                                            ((10, np.nan), "nan at index 1")])
+def test_npz_episode_lengths_that_are_not_whole_numbers_are_one_line(tmp_path, lengths, shown):
+    """Not truncated to whole steps, nor cast with a numpy warning on a line of its own."""
+    path = write_npz(tmp_path / "demos.npz", lengths=lengths)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(DatasetError) as err:
+            read_door_npz(path)
+    assert_one_line(err, path, "whole numbers of steps", shown)
+
+
 def test_npz_episode_of_length_zero(tmp_path):
     path = write_npz(tmp_path / "demos.npz", lengths=(10, 0, 20))
     with pytest.raises(DatasetError) as err:

@@ -352,7 +352,16 @@ def read_door_npz(path, env: str = "door", clip_actions: bool | None = None) -> 
         if key not in data:
             raise DatasetError(f"{path}: missing key '{key}' (found: {', '.join(sorted(data)) or 'none'})")
     check_lengths(path, {k: data[k] for k in ("observations", "actions", "rewards")})
-    lengths = np.asarray(data["episode_lengths"]).astype(np.int64).ravel()
+    raw = np.asarray(data["episode_lengths"]).ravel()
+    if raw.dtype.kind not in "iuf":
+        raise DatasetError(f"{path}: episode_lengths must be whole numbers of steps, not {raw.dtype}")
+    if raw.dtype.kind == "f":
+        with np.errstate(invalid="ignore"):
+            bad = ~(np.isfinite(raw) & (raw == np.round(raw)) & (np.abs(raw) < 2**62))
+        if bad.any():
+            raise DatasetError(f"{path}: episode_lengths must be whole numbers of steps ({float(raw[bad][0]):g} at index "
+                               f"{int(np.argmax(bad))})")
+    lengths = raw.astype(np.int64)
     if np.any(lengths <= 0):
         raise DatasetError(f"{path}: episode_lengths has {int(np.sum(lengths <= 0))} episode(s) of length 0 or less "
                            f"(first at index {int(np.argmax(lengths <= 0))})")
