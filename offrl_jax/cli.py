@@ -54,15 +54,29 @@ class OneLineParser(argparse.ArgumentParser):
 COUNT_MAX = 2**31 - 1  # counters (updates, evaluation steps) are int32 inside the jitted programs
 
 
-def positive_int(text: str) -> int:
-    """A count: an integer in [1, 2**31); "1e6" is accepted, "2.5e0", "1e400" and "1e26" are not."""
+def _whole(text: str, what: str) -> int:
+    """`text` as an integer, "1e6" included ("2.5e0" and "1e400" not)."""
     try:
         number = float(text) if "e" in text.lower() else int(text)
         value = int(number)
         if value != number:
             raise ValueError
     except (ValueError, OverflowError):
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+        raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+    return value
+
+
+def integer(text: str) -> int:
+    """A config's integer field from the command line (its range is the config's to check): |value| < 2**31."""
+    value = _whole(text, "an integer")
+    if abs(value) > COUNT_MAX:
+        raise argparse.ArgumentTypeError(f"expected an integer below 2**31 in size, got {text!r}")
+    return value
+
+
+def positive_int(text: str) -> int:
+    """A count: an integer in [1, 2**31); "1e6" is accepted, "2.5e0", "1e400" and "1e26" are not."""
+    value = _whole(text, "a positive integer")
     if not 0 < value <= COUNT_MAX:
         raise argparse.ArgumentTypeError(f"expected a positive integer below 2**31, got {text!r}")
     return value

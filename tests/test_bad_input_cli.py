@@ -153,9 +153,23 @@ def _one_line_error(module: str, *args: str, cwd=None):
     ("experiments.mujoco_medium", ["--coordinator", "localhost:-5", "--num-processes", "2", "--process-id", "0"],
      "port in [1, 65535]"),
     ("experiments.mujoco_medium", ["--keep-checkpoints", "99999999999999999999"], "integer >= 0 below 2**31"),
+    ("experiments.mujoco_medium", ["--algo", "iql", "--actor-lr-decay", "x"], "expected an integer, got 'x'"),
+    ("experiments.mujoco_medium", ["--algo", "edac", "--num-critics", "2.5"], "expected an integer, got '2.5'"),
 ])
+
 def test_entry_point_refuses_bad_values_in_one_line(module, args, message):
     assert message in _one_line_error(module, *args)
+
+
+def test_a_config_integer_is_read_as_counts_are():
+    """A config's integer field takes "1e6" as --updates does (its range is the config's to check)."""
+    import argparse
+
+    from offrl_jax.cli import integer
+    assert (integer("1e6"), integer("-3"), integer("0")) == (1_000_000, -3, 0)
+    for text in ("2.5", "1e40", "nan", ""):
+        with pytest.raises(argparse.ArgumentTypeError):
+            integer(text)
 
 
 @pytest.mark.parametrize("module, args", [

@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from offrl_jax.algos import FAMILIES
-from offrl_jax.cli import int_at_least, number, positive_int, seed_int
+from offrl_jax.cli import int_at_least, integer, number, positive_int, seed_int
 from offrl_jax.loggers import LOGGERS
 from offrl_jax.study import MAX_MEMBERS
 
@@ -97,7 +97,7 @@ def _argument(annotation: Any, sweepable: bool) -> dict[str, Any]:
     if origin is tuple:
         kind = number() if args[0] is float else positive_int
         return {"type": kind, "nargs": "+" if args[-1] is Ellipsis else len(args), "metavar": args[0].__name__.upper()}
-    kind = {int: int, float: number(), str: str}[annotation]
+    kind = {int: integer, float: number(), str: str}[annotation]
     return {"type": kind} | ({"nargs": "+"} if sweepable else {})
 
 

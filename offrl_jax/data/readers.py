@@ -359,8 +359,8 @@ def read_door_npz(path, env: str = "door", clip_actions: bool | None = None) -> 
         with np.errstate(invalid="ignore"):
             bad = ~(np.isfinite(raw) & (raw == np.round(raw)) & (np.abs(raw) < 2**62))
         if bad.any():
-            raise DatasetError(f"{path}: episode_lengths must be whole numbers of steps ({float(raw[bad][0]):g} at index "
-                               f"{int(np.argmax(bad))})")
+            raise DatasetError(f"{path}: episode_lengths must be whole numbers of steps "
+                               f"({float(raw[bad][0]):g} at index {int(np.argmax(bad))})")
     lengths = raw.astype(np.int64)
     if np.any(lengths <= 0):
         raise DatasetError(f"{path}: episode_lengths has {int(np.sum(lengths <= 0))} episode(s) of length 0 or less "
