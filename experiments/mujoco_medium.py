@@ -30,10 +30,12 @@ PRESET_FIXED = ("env", "algo", "level", "updates", "eval_every")  # what --prese
 
 def build(args) -> Study | list[Study]:
     if "paper" in (args.preset or []):
-        defaults = make_parser()
-        changed = [f"--{d.replace('_', '-')}" for d in PRESET_FIXED if getattr(args, d) != defaults.get_default(d)]
+        defaults, typed = make_parser(), getattr(args, "typed", frozenset())  # typed: set by the command line
+        changed = [f"--{d.replace('_', '-')}" for d in PRESET_FIXED
+                   if d in typed or getattr(args, d) != defaults.get_default(d)]
         if changed:
-            raise UsageError(f"--preset paper sets {', '.join(changed)} itself; leave them out")
+            them = "them" if len(changed) > 1 else "it"
+            raise UsageError(f"--preset paper sets {', '.join(changed)} itself; leave {them} out")
         return [make_study(env, algo, "medium", args, dict(updates=1_000_000, eval_every=10_000))
                 for env in ENVS for algo in ("td3bc", "edac")]
     return make_study(args.env, args.algo, args.level, args)

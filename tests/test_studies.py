@@ -103,6 +103,10 @@ def test_the_main_job_declares_its_default_preset():
 def test_preset_paper_refuses_the_flags_it_sets():
     with pytest.raises(UsageError, match="--preset paper sets --env, --updates itself"):
         build(mujoco_medium, ["--preset", "paper", "--env", "walker2d", "--updates", "1000"])
+    # a flag typed with its default value is typed too (the command line says which were typed)
+    from tests.entry import run_module
+    result = run_module("experiments.mujoco_medium", "--preset", "paper", "--updates", "40000")
+    assert result.returncode == 2 and "--preset paper sets --updates itself; leave it out" in result.stderr
 
 
 def test_figure2_num_critics_is_edac_only():

@@ -170,7 +170,8 @@ class Command:
                                      f"change a value with its flag (--config {path} --FLAG VALUE)")
             self.built = replay(saved, args, given, typed)
         elif not self.resuming:
-            self.built = build(args)  # validates every hyper-parameter and budget
+            # validates every hyper-parameter and budget; `typed`: the flags typed, a default value typed included
+            self.built = build(argparse.Namespace(**vars(args), typed=frozenset(given)))
 
     # 2. start the processes
     def start_processes(self) -> None:
