@@ -421,3 +421,16 @@ def test_an_npz_with_d4rl_keys_clips_its_actions_when_asked(tmp_path):
     with pytest.warns(UserWarning, match="clipped"):
         ds = load_dataset_path(path, clip_actions=True)
     assert ds.actions.max() <= 1.0
+
+
+def test_a_value_beyond_float32_is_non_finite_in_one_line(tmp_path):
+    """float64 rewards of 1e39 become inf in float32: refused as non-finite, without numpy's overflow warning."""
+    arrays = d4rl_arrays()
+    arrays["rewards"] = arrays["rewards"].astype(np.float64)
+    arrays["rewards"][2] = 1e39
+    path = write_h5(tmp_path / "d.hdf5", arrays)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(DatasetError) as err:
+            read_d4rl_hdf5(path)
+    assert_one_line(err, path, "rewards contains 1 non-finite", "beyond float32's range")

@@ -46,7 +46,8 @@ def _as_float32(path, name: str, x: np.ndarray, ndim: int) -> np.ndarray:
         raise DatasetError(f"{path}: {name} has shape {x.shape}, expected {ndim} dimension(s)")
     if x.dtype.kind not in "biuf":  # strings, bytes, objects: not numbers, whatever they would parse to
         raise DatasetError(f"{path}: {name} holds {x.dtype} values, not numbers")
-    return x.astype(np.float32)
+    with np.errstate(over="ignore", invalid="ignore"):  # beyond float32's range: inf, refused as non-finite
+        return x.astype(np.float32)
 
 
 def _check_env(path, ds: Dataset, env: str) -> None:
@@ -96,7 +97,8 @@ def validate(ds: Dataset, path, env: str | None = None, clip_actions: bool = Fal
     for name in FINITE_FIELDS:
         bad = int(np.count_nonzero(~np.isfinite(out[name])))
         if bad:
-            raise DatasetError(f"{path}: {name} contains {bad} non-finite values (NaN or inf)")
+            raise DatasetError(f"{path}: {name} contains {bad} non-finite values (NaN, inf, or beyond float32's "
+                               "range of 3.4e38)")
     for name in ("terminals", "timeouts"):  # flags: exactly 0 or 1 (a NaN or a 2 is a broken file, not a flag)
         bad = ~np.isin(out[name], (0.0, 1.0))
         if bad.any():
