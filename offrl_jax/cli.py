@@ -240,4 +240,8 @@ def run_main(main: Callable[[], object]) -> NoReturn:
             raise
         print_error(e)
         code = 2
+    if code == 130:  # interrupted, and said so: leave at once too (a shutdown after a SIGTERM could segfault)
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(exit_code(130))
     sys.exit(exit_code(code) if isinstance(code, int) else 0)

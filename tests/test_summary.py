@@ -226,8 +226,8 @@ def test_merge_runs_resummarises_variants_trained_apart(tmp_path, capsys):
                                            **(common | {"dataset": "hopper-medium-replay"})), scratch_rows)
     assert report.main(["--merge", str(tmp_path / "ac"), str(a), str(other)]) == 2
     assert "dataset differ" in capsys.readouterr().err and not (tmp_path / "ac").exists()
-    assert report.main(["--merge", str(tmp_path / "bb"), str(b), str(b)]) == 2  # the same variant twice
-    assert "unique labels" in capsys.readouterr().err
+    assert report.main(["--merge", str(tmp_path / "bb"), str(b), str(b)]) == 2  # the same run twice
+    assert "is given twice" in capsys.readouterr().err and not (tmp_path / "bb").exists()
 
 
 def test_a_truncated_curves_csv_is_refused_not_read_short(tmp_path):

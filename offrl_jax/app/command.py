@@ -306,7 +306,7 @@ def run_command(build: Build, parser: argparse.ArgumentParser, argv=None,
         return code
     finally:
         failed = command.clean_up(ok)
-        if not ok:  # leave now: JAX's exit handlers would wait for worker processes or tear down a computation
+        if command.local is not None and not ok:  # leave now: JAX's exit handler would wait for the processes
             sys.stdout.flush()
             sys.stderr.flush()
             os._exit(exit_code(code))  # 143 for a SIGTERM's interruption
