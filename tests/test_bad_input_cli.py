@@ -1,7 +1,8 @@
 """Every bad-input case of the reliability contract through a CLI: `error: <file>: <problem>`, exit 2, one line.
 
 (missing file, NaN, out-of-bounds actions and unknown names are in test_datasets_cli.py; invalid hyper-parameters
-and unknown env/algorithm names through the experiment CLI in test_experiments.py.)
+and unknown env/algorithm names through the experiment CLI in test_experiments.py; bad numbers, paths and choices
+of every entry point in the one table of test_every_entry_point.py.)
 """
 import shutil
 from pathlib import Path
@@ -107,58 +108,6 @@ def _one_line_error(module: str, *args: str, cwd=None):
     assert result.returncode == 2, result.stderr
     assert "Traceback" not in result.stderr and lines and lines[-1].startswith("error:"), result.stderr
     return lines[-1]
-
-
-@pytest.mark.parametrize("module, args, message", [
-    # a bad number, a non-finite number, a value out of range
-    ("experiments.theory", ["--eps", "nan"], "finite number >= 0"),
-    ("experiments.theory", ["--eps", "-5"], "finite number >= 0"),
-    ("experiments.theory", ["--delta", "0"], "(0, 1)"),
-    ("experiments.theory", ["--betas", "2"], "[0, 1]"),
-    ("experiments.theory", ["--mdps", "x"], "positive integer"),
-    ("experiments.adroit_door", ["--scale", "inf"], "finite number"),
-    ("experiments.adroit_door", ["--alpha", "nan"], "finite number"),
-    ("experiments.adroit_random_scores", ["--episodes", "1"], "integer in [2, 1000000]"),
-    ("offrl_jax.datasets", ["info", ""], "got an empty string"),
-    ("experiments.mujoco_medium", ["--seeds", "100000000"], "up to 1,024 (a variant's seeds train as one program"),
-    ("experiments.ablation", ["--seeds", "2000"], "up to 1,024"),
-    ("offrl_jax.datasets", ["generate", "hopper-medium", "--transitions", "0"], "positive integer"),
-    ("offrl_jax.datasets", ["generate", "hopper-medium", "--transitions", "-5"], "positive integer"),
-    ("benchmarks.throughput", ["--seeds", "0"], "positive integer"),
-    ("benchmarks.throughput", ["--transitions", "0"], "positive integer"),
-    ("benchmarks.throughput", ["--target-s", "nan"], "finite number > 0"),
-    ("benchmarks.throughput", ["--reps", "0"], "positive integer"),
-    ("experiments.mujoco_medium", ["--alpha", "inf"], "finite number"),
-    ("experiments.mujoco_medium", ["--algo", "bc"], "has no effect on the BC baseline"),
-    ("experiments.ablation", ["--algo", "bc"], "the BC baseline has none to compare"),
-    ("experiments.mujoco_medium", ["--updates", "1e26"], "positive integer below 2**31"),
-    ("benchmarks.parallel", ["--seeds", "0"], "positive integer"),
-    ("experiments.mujoco_medium", ["--seed-offset", "99999999999999999999999"], "expected a seed"),
-    ("offrl_jax.datasets", ["generate", "hopper-medium", "--transitions", "10", "--seed", "-1"], "expected a seed"),
-    ("experiments.theory", ["--seed", "-1"], "expected a seed"),
-    ("experiments.theory", ["--actions", "99999999999999999"], "expected an integer in [2, 1000]"),
-    ("experiments.adroit_random_scores", ["--seed", "-1"], "expected a seed"),
-    ("experiments.report", ["results/figure2/hopper-edac", "--overlay"], "give --plot too"),
-    ("experiments.mujoco_medium", ["--cql-weight", "1", "--cql-actions", "0"], "cql_actions = 0 must be >= 1"),
-    ("benchmarks.parallel", ["--cases", "gpu"], "invalid choice"),
-    # a missing file
-    ("benchmarks.throughput", ["--markdown", "/nonexistent.jsonl"], "/nonexistent.jsonl"),
-    ("experiments.report", ["/nonexistent/run"], "/nonexistent/run"),
-    ("experiments.mujoco_medium", ["--config", "/nonexistent/config.json"], "/nonexistent/config.json"),
-    ("experiments.mujoco_medium", ["--config", "tests"], "tests: a directory without a config.json"),
-    ("experiments.mujoco_medium", ["--dataset-path", ""], "empty string"),
-    ("experiments.mujoco_medium", ["--out", "runs/a\tb"], "without control characters"),
-    ("experiments.mujoco_medium", ["--coordinator", "notanaddress", "--num-processes", "2", "--process-id", "0"],
-     "expected HOST:PORT"),
-    ("experiments.mujoco_medium", ["--coordinator", "localhost:-5", "--num-processes", "2", "--process-id", "0"],
-     "port in [1, 65535]"),
-    ("experiments.mujoco_medium", ["--keep-checkpoints", "99999999999999999999"], "integer >= 0 below 2**31"),
-    ("experiments.mujoco_medium", ["--algo", "iql", "--actor-lr-decay", "x"], "expected an integer, got 'x'"),
-    ("experiments.mujoco_medium", ["--algo", "edac", "--num-critics", "2.5"], "expected an integer, got '2.5'"),
-])
-
-def test_entry_point_refuses_bad_values_in_one_line(module, args, message):
-    assert message in _one_line_error(module, *args)
 
 
 def test_a_config_integer_is_read_as_counts_are():

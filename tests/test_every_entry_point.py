@@ -1,6 +1,7 @@
 """Every entry point, four kinds of bad input: a bad number, a non-finite number, a missing file, an unwritable
-output.  Each is one `error:` line, exit 2, no traceback, and nothing written.  A command that has no input of a
-kind (no number, no file to read, nothing it writes) has no case of it."""
+output (`CASES`), then more refusals with the fragment each line must hold (`MORE`).  Each is one `error:` line,
+exit 2, no traceback, and nothing written.  A command that has no input of a kind (no number, no file to read,
+nothing it writes) has no case of it."""
 from pathlib import Path
 
 import pytest
@@ -109,3 +110,63 @@ def test_every_entry_point_refuses_bad_input_in_one_line(tmp_path, module, kind)
     if kind == "output":
         assert any(w in lines[-1] for w in ("not writable", "not a directory", "is a file")), lines[-1]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["f"]  # nothing written
+
+
+# more refusals, each with a fragment of its one line: (module, arguments, fragment)
+MORE = [
+    # a bad number, a non-finite number, a value out of range
+    ("experiments.theory", ["--eps", "nan"], "finite number >= 0"),
+    ("experiments.theory", ["--eps", "-5"], "finite number >= 0"),
+    ("experiments.theory", ["--delta", "0"], "(0, 1)"),
+    ("experiments.theory", ["--betas", "2"], "[0, 1]"),
+    ("experiments.theory", ["--mdps", "x"], "positive integer"),
+    ("experiments.adroit_door", ["--scale", "inf"], "finite number"),
+    ("experiments.adroit_door", ["--alpha", "nan"], "finite number"),
+    ("experiments.adroit_random_scores", ["--episodes", "1"], "integer in [2, 1000000]"),
+    ("offrl_jax.datasets", ["info", ""], "got an empty string"),
+    ("experiments.mujoco_medium", ["--seeds", "100000000"], "up to 1,024 (a variant's seeds train as one program"),
+    ("experiments.ablation", ["--seeds", "2000"], "up to 1,024"),
+    ("offrl_jax.datasets", ["generate", "hopper-medium", "--transitions", "0"], "positive integer"),
+    ("offrl_jax.datasets", ["generate", "hopper-medium", "--transitions", "-5"], "positive integer"),
+    ("benchmarks.throughput", ["--seeds", "0"], "positive integer"),
+    ("benchmarks.throughput", ["--transitions", "0"], "positive integer"),
+    ("benchmarks.throughput", ["--target-s", "nan"], "finite number > 0"),
+    ("benchmarks.throughput", ["--reps", "0"], "positive integer"),
+    ("experiments.mujoco_medium", ["--alpha", "inf"], "finite number"),
+    ("experiments.mujoco_medium", ["--algo", "bc"], "has no effect on the BC baseline"),
+    ("experiments.ablation", ["--algo", "bc"], "the BC baseline has none to compare"),
+    ("experiments.mujoco_medium", ["--updates", "1e26"], "positive integer below 2**31"),
+    ("benchmarks.parallel", ["--seeds", "0"], "positive integer"),
+    ("experiments.mujoco_medium", ["--seed-offset", "99999999999999999999999"], "expected a seed"),
+    ("offrl_jax.datasets", ["generate", "hopper-medium", "--transitions", "10", "--seed", "-1"], "expected a seed"),
+    ("experiments.theory", ["--seed", "-1"], "expected a seed"),
+    ("experiments.theory", ["--actions", "99999999999999999"], "expected an integer in [2, 1000]"),
+    ("experiments.adroit_random_scores", ["--seed", "-1"], "expected a seed"),
+    ("experiments.report", [str(ROOT / "results/figure2/hopper-edac"), "--overlay"], "give --plot too"),
+    ("experiments.mujoco_medium", ["--cql-weight", "1", "--cql-actions", "0"], "cql_actions = 0 must be >= 1"),
+    ("benchmarks.parallel", ["--cases", "gpu"], "invalid choice"),
+    # a missing file
+    ("benchmarks.throughput", ["--markdown", "/nonexistent.jsonl"], "/nonexistent.jsonl"),
+    ("experiments.report", ["/nonexistent/run"], "/nonexistent/run"),
+    ("experiments.mujoco_medium", ["--config", "/nonexistent/config.json"], "/nonexistent/config.json"),
+    ("experiments.mujoco_medium", ["--config", str(ROOT / "tests")], "tests: a directory without a config.json"),
+    ("experiments.mujoco_medium", ["--dataset-path", ""], "empty string"),
+    ("experiments.mujoco_medium", ["--out", "runs/a\tb"], "without control characters"),
+    ("experiments.mujoco_medium", ["--coordinator", "notanaddress", "--num-processes", "2", "--process-id", "0"],
+     "expected HOST:PORT"),
+    ("experiments.mujoco_medium", ["--coordinator", "localhost:-5", "--num-processes", "2", "--process-id", "0"],
+     "port in [1, 65535]"),
+    ("experiments.mujoco_medium", ["--keep-checkpoints", "99999999999999999999"], "integer >= 0 below 2**31"),
+    ("experiments.mujoco_medium", ["--algo", "iql", "--actor-lr-decay", "x"], "expected an integer, got 'x'"),
+    ("experiments.mujoco_medium", ["--algo", "edac", "--num-critics", "2.5"], "expected an integer, got '2.5'"),
+]
+
+
+@pytest.mark.parametrize("module, args, fragment", MORE)
+def test_more_bad_values_are_refused_in_one_line(tmp_path, module, args, fragment):
+    result = run_module(module, *args, cwd=tmp_path)
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 2, result.stderr
+    assert "Traceback" not in result.stderr and lines and lines[-1].startswith("error: "), result.stderr
+    assert fragment in lines[-1], lines[-1]
+    assert not any(tmp_path.iterdir())  # nothing written
