@@ -23,7 +23,7 @@ from pathlib import Path
 
 from offrl_jax.cli import OneLineParser, check_writable_dir, one_line_warnings, positive_int, print_error, seed_int
 from offrl_jax.data.dataset import Dataset, DatasetError, dataset_dir
-from offrl_jax.data.readers import load_dataset_path, minari_root, read_door_npz, read_minari
+from offrl_jax.data.readers import FILE_SUFFIXES, load_dataset_path, minari_root, read_door_npz, read_minari
 from offrl_jax.envs import get_env_spec, normalized_score
 
 _LOCOMOTION_KINDS = {
@@ -153,7 +153,7 @@ def load(name_or_path, *, max_transitions: int | None = None, clip_actions: bool
     elif name in KNOWN:
         ds = _load_generated(name, max_transitions, clip_actions, generate_if_missing)
     else:
-        looks_like_path = (Path(name).exists() or Path(name).suffix.lower() in (".hdf5", ".h5", ".npz")
+        looks_like_path = (Path(name).exists() or Path(name).suffix.lower() in FILE_SUFFIXES
                            or "/" in name or (minari_root() / name).is_dir())
         if not looks_like_path:
             raise _unknown(name)

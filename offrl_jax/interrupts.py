@@ -15,6 +15,8 @@ import os
 import signal
 import sys
 
+from offrl_jax.cache import keep_compiled_programs
+
 RETRY_S = 0.05
 
 
@@ -27,14 +29,10 @@ def quiet_start() -> None:
     """When Python runs one of the package's modules as a command (`python -m ...`: sys.argv[0] is "-m" while the
     package imports), a Ctrl-C until `run_main` ends the process at once, with one line and exit 130.  An import
     for any other purpose, or a process that ignores Ctrl-C, is left as it is.  A command also keeps JAX's compiled
-    programs in <dataset cache>/xla, unless $JAX_COMPILATION_CACHE_DIR says where."""
+    programs (`offrl_jax.cache.keep_compiled_programs`)."""
     if sys.argv[:1] != ["-m"]:
         return
-    if "JAX_COMPILATION_CACHE_DIR" not in os.environ:  # a command's compiled programs are kept for the next one
-        from offrl_jax.data.dataset import cache_dir  # (12 s less start-up for a tiny run the second time)
-
-        os.environ["JAX_COMPILATION_CACHE_DIR"] = str(cache_dir() / "xla")
-        os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0.1")  # most of a tiny run's programs
+    keep_compiled_programs()
     if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
         signal.signal(signal.SIGINT, _interrupted_while_starting)
     if sys.excepthook is sys.__excepthook__:

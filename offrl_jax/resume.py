@@ -129,6 +129,14 @@ def resolved_differences(study: Study, config_path: Path) -> list[str]:
             for key, value in values.items() if key in now[label] and value != now[label][key]]
 
 
+def edited_resolved(study: Study, config_path: Path) -> str | None:
+    """Where `config_path`'s `resolved` section was edited, the first half of the refusal naming what differs (its
+    second half says what to do instead); None where it was not."""
+    differ = resolved_differences(study, config_path)
+    return f"{config_path}: its resolved configs are not what its variants give ({'; '.join(differ[:3])})" \
+        if differ else None
+
+
 def check_resume(study: Study, out_dir: Path, ds, data_sha256: str) -> None:
     """Raise ResumeMismatch if a checkpoint in `out_dir` does not belong to `study` on `ds` (see the module)."""
     groups = study.groups()
@@ -178,7 +186,6 @@ def check_resume(study: Study, out_dir: Path, ds, data_sha256: str) -> None:
                    f"it holds rows of other variants ({', '.join(strangers[:3])})")
             raise ResumeMismatch(f"{path}: does not belong to this run ({why}); nothing was changed")
     # the checkpoints are this study's: a resolved config that differs from it was edited in config.json
-    if differ := resolved_differences(study, out_dir / "config.json"):
-        raise ResumeMismatch(f"{out_dir / 'config.json'}: its resolved configs are not what its variants give "
-                             f"({'; '.join(differ[:3])}); an edited config.json is refused: start a new run with "
-                             "--config to change a value; nothing was changed")
+    if edited := edited_resolved(study, out_dir / "config.json"):
+        raise ResumeMismatch(f"{edited}; an edited config.json is refused: start a new run with --config to change a "
+                             "value; nothing was changed")

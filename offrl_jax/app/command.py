@@ -33,7 +33,7 @@ from offrl_jax.cli import UsageError, check_writable_dir, lock_run_dir, one_line
 from offrl_jax.data.dataset import DatasetError
 from offrl_jax.interrupts import exit_code
 from offrl_jax.provenance import fingerprint
-from offrl_jax.resume import check_resume, resolved_differences
+from offrl_jax.resume import check_resume, edited_resolved
 from offrl_jax.runner import Diverged, run_study
 from offrl_jax.study import Study, Variant
 from offrl_jax.summary import print_table
@@ -164,10 +164,9 @@ class Command:
             saved = saved_studies(path.parent, path)
             for study in saved if isinstance(saved, list) else [saved]:  # an edited `resolved` is not read: refuse
                 own = path.parent / study.name / "config.json" if isinstance(saved, list) else path
-                if own.is_file() and (differ := resolved_differences(study, own)):
-                    raise UsageError(f"{own}: its resolved configs are not what its variants give "
-                                     f"({'; '.join(differ[:3])}); the `resolved` section is a record, not read: "
-                                     f"change a value with its flag (--config {path} --FLAG VALUE)")
+                if own.is_file() and (edited := edited_resolved(study, own)):
+                    raise UsageError(f"{edited}; the `resolved` section is a record, not read: change a value with "
+                                     f"its flag (--config {path} --FLAG VALUE)")
             self.built = replay(saved, args, given, typed)
         elif not self.resuming:
             # validates every hyper-parameter and budget; `typed`: the flags typed, a default value typed included

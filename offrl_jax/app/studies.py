@@ -15,6 +15,7 @@ from pathlib import Path
 from offrl_jax.algos import ALGOS, PRESETS, SACNConfig, preset_values
 from offrl_jax.app.flags import FLAG_FIELDS, add_config_flags, config_values, run_args, sweepable_fields
 from offrl_jax.cli import OneLineParser, UsageError, positive_int
+from offrl_jax.data.readers import FILE_SUFFIXES
 from offrl_jax.study import Study, Variant
 
 ENVS = ("hopper", "halfcheetah", "walker2d")
@@ -148,7 +149,7 @@ def dataset_label(dataset_path: str) -> str:
     """A user dataset's part of a study's name: the file's or folder's name without its suffix ("my-hopper.npz":
     "my-hopper"), a Minari id with - for / ("mujoco/hopper/medium-v0": "mujoco-hopper-medium-v0")."""
     path = Path(dataset_path)
-    name = path.stem if path.suffix in (".npz", ".hdf5", ".h5") else (path.name if path.exists() else dataset_path)
+    name = path.stem if path.suffix.lower() in FILE_SUFFIXES else (path.name if path.exists() else dataset_path)
     return re.sub(r"[^A-Za-z0-9._+=-]+", "-", name).strip("-.") or "dataset"
 
 

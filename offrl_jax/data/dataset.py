@@ -9,10 +9,11 @@ forever" assumption as the r_T / (1 - gamma) tail of the returns-to-go.
 from __future__ import annotations
 
 import dataclasses
-import os
 from pathlib import Path
 
 import numpy as np
+
+from offrl_jax.cache import cache_dir
 
 ARRAY_FIELDS = ("observations", "actions", "rewards", "next_observations", "terminals", "timeouts")
 NORMALIZE_EPS = 1e-3
@@ -83,15 +84,6 @@ class Dataset:
 
 def normalize_obs(obs: np.ndarray, mean: np.ndarray, std: np.ndarray) -> np.ndarray:
     return (obs - mean) / std
-
-
-def cache_dir() -> Path:
-    """Where generated datasets are cached: $OFFRL_JAX_CACHE, else $XDG_CACHE_HOME/offrl_jax, else
-    ~/.cache/offrl_jax."""
-    if os.environ.get("OFFRL_JAX_CACHE"):
-        return Path(os.environ["OFFRL_JAX_CACHE"])
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "offrl_jax"
 
 
 def dataset_dir(name: str) -> Path:

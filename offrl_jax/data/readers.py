@@ -23,6 +23,8 @@ import numpy as np
 from offrl_jax.data.dataset import Dataset, DatasetError
 from offrl_jax.envs import ENVS
 
+FILE_SUFFIXES = (".hdf5", ".h5", ".npz")  # a dataset file: D4RL's HDF5, or an .npz of arrays
+
 ACTION_BOUND = 1.0  # every env in `ENVS` has the action box [-1, 1]
 FINITE_FIELDS = ("observations", "actions", "rewards", "next_observations")
 D4RL_REQUIRED = ("observations", "actions", "rewards", "terminals")

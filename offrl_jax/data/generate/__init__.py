@@ -33,8 +33,9 @@ from typing import Any
 
 import numpy as np
 
+from offrl_jax.cache import cache_dir
 from offrl_jax.checkpoint import atomic_write_text
-from offrl_jax.data.dataset import Dataset, cache_dir, dataset_dir
+from offrl_jax.data.dataset import Dataset, dataset_dir
 from offrl_jax.data.generate.collect import (
     MEDIUM_TARGET_SCORE,
     POLICY_DIR,
