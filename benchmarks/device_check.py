@@ -29,7 +29,7 @@ import jax
 import jax.numpy as jnp
 
 from benchmarks.throughput import CASES, append_results, init_states, results_path, synthetic_data, time_case
-from offrl_jax.cli import OneLineParser, positive_int
+from offrl_jax.system.cli import OneLineParser, positive_int
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -53,10 +53,9 @@ def peak_memory() -> int | None:
 
 def main_job(timeout_s: float) -> dict:
     """The main job's default, timed; hopper-medium must be cached (generating it is CPU work, ~3 minutes)."""
-    from offrl_jax import datasets
-
-    if not datasets.is_cached("hopper-medium"):
-        return {"skipped": "hopper-medium is not cached here: run `python -m offrl_jax.datasets generate "
+    from offrl_jax.data import catalogue
+    if not catalogue.is_cached("hopper-medium"):
+        return {"skipped": "hopper-medium is not cached here: run `python -m offrl_jax.data generate "
                            "hopper-medium` first (CPU, ~3 minutes), then this check again"}
     with tempfile.TemporaryDirectory() as out:
         tic = time.perf_counter()
@@ -125,6 +124,6 @@ def main(argv: list[str] | None = None) -> dict:
 
 
 if __name__ == "__main__":
-    from offrl_jax.cli import run_main
+    from offrl_jax.system.cli import run_main
 
     run_main(main)

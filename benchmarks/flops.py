@@ -156,7 +156,7 @@ def main(argv: list[str] | None = None) -> int:
     import argparse
 
     from offrl_jax.algos import make_config
-    from offrl_jax.cli import OneLineParser, positive_int
+    from offrl_jax.system.cli import OneLineParser, positive_int
 
     p = OneLineParser(prog="python -m benchmarks.flops", description=__doc__,
                       formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -177,6 +177,6 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    from offrl_jax.cli import run_main
+    from offrl_jax.system.cli import run_main
 
     run_main(main)

@@ -19,7 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from offrl_jax.cli import OneLineParser, positive_int
+from offrl_jax.system.cli import OneLineParser, positive_int
 
 OBS, ACT, HIDDEN, BATCH, ROWS = 11, 3, 256, 256, 100_000
 
@@ -170,6 +170,6 @@ def main(argv=None) -> float:
 
 
 if __name__ == "__main__":
-    from offrl_jax.cli import run_main
+    from offrl_jax.system.cli import run_main
 
     run_main(main)

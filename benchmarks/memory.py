@@ -1,4 +1,5 @@
-"""Peak memory (RSS) of training on a 1M-transition dataset with S vmapped seeds: the dataset lives once, not per seed.
+"""Peak memory (RSS) of training on a 1M-transition dataset with S seeds (the member axis): the dataset lives once,
+not per seed.
 
     python -m benchmarks.memory [--algos td3bc edac] [--seeds 1 8] [--transitions 1000000] [--json] [--out NAME]
 
@@ -7,7 +8,7 @@ on the device (`device_data`), initialise S seeds with the real `Driver`, and ru
 (EDAC's soft-return computation over the whole dataset included); the child reports its peak resident set size
 (`ru_maxrss`) and the bytes of the device arrays it holds.
 The dataset (obs, next obs, actions, rewards, flags, returns: 111 MB at 1M hopper rows in float32) is passed to the
-vmapped chunk with `in_axes=None`, so S seeds share one copy; what grows with S is the agent state (parameters, Adam
+chunk function with `in_axes=None`, so S seeds share one copy; what grows with S is the agent state (parameters, Adam
 moments, targets: ~3 MB per TD3+BC seed) and, for EDAC, each seed's own soft returns (4 bytes per transition).
 """
 from __future__ import annotations
@@ -18,7 +19,7 @@ import resource
 import subprocess
 import sys
 
-from offrl_jax.cli import OneLineParser, positive_int
+from offrl_jax.system.cli import OneLineParser, positive_int
 
 
 def child(algo: str, seeds: int, transitions: int) -> dict:
@@ -49,7 +50,7 @@ def main(argv=None) -> int:
     p = OneLineParser(prog="benchmarks.memory", description=__doc__,
                       formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--algos", nargs="+", default=["td3bc", "edac"], choices=["td3bc", "edac", "td3bc_cql", "edac_bc"])
-    p.add_argument("--seeds", nargs="+", type=positive_int, default=[1, 8], help="vmapped seed counts (default 1 8)")
+    p.add_argument("--seeds", nargs="+", type=positive_int, default=[1, 8], help="seed counts (default 1 8)")
     p.add_argument("--transitions", type=positive_int, default=1_000_000, help="rows of the synthetic dataset")
     p.add_argument("--json", action="store_true", help="one JSON object per case on stdout")
     p.add_argument("--out", default=None,
@@ -92,6 +93,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    from offrl_jax.cli import run_main
+    from offrl_jax.system.cli import run_main
 
     run_main(main)

@@ -1,9 +1,9 @@
 """Two variants at once: threads of one process against worker processes pinned to their own cores.
 
-What `--parallel 2` chooses between.  Each case trains `--variants` TD3+BC offline-RL programs of `--seeds` vmapped
-seeds each (the main job's shape: 3 seeds, hopper-shaped synthetic data, batch 256, LayerNorm) at the same time,
-and reports the updates per second summed over every seed of every variant, timed from a common start after each
-program has compiled and run one warm-up chunk:
+What `--parallel 2` chooses between.  Each case trains `--variants` TD3+BC offline-RL programs of `--seeds`
+seeds each on its member axis (the main job's shape: 3 seeds, hopper-shaped synthetic data, batch 256, LayerNorm)
+at the same time, and reports the updates per second summed over every seed of every variant, timed from a common
+start after each program has compiled and run one warm-up chunk:
 
     python -m benchmarks.parallel                       # every case, a table
     python -m benchmarks.parallel --json --calls 50     # JSON lines, shorter chunks
@@ -26,8 +26,8 @@ import sys
 import threading
 import time
 
-from offrl_jax.cli import OneLineParser, positive_int
-from offrl_jax.workers import SINGLE_THREAD_XLA, core_sets
+from offrl_jax.system.cli import OneLineParser, positive_int
+from offrl_jax.system.workers import SINGLE_THREAD_XLA, core_sets
 
 CASES = ("threads", "threads-1t", "processes", "pinned-1t", "alone")
 
@@ -102,7 +102,7 @@ def main(argv: list[str] | None = None) -> None:
                       formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--cases", nargs="+", choices=CASES, default=list(CASES))
     p.add_argument("--variants", type=positive_int, default=2, help="variants trained at once")
-    p.add_argument("--seeds", type=positive_int, default=3, help="vmapped seeds per variant")
+    p.add_argument("--seeds", type=positive_int, default=3, help="seeds per variant, on its member axis")
     p.add_argument("--calls", type=positive_int, default=250, help="update calls (2 updates each) per timed chunk")
     p.add_argument("--transitions", type=positive_int, default=1_000_000, help="rows of the synthetic dataset")
     p.add_argument("--start-after", type=positive_int, default=60,
@@ -125,6 +125,6 @@ def main(argv: list[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    from offrl_jax.cli import run_main
+    from offrl_jax.system.cli import run_main
 
     run_main(main)

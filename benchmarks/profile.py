@@ -37,7 +37,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from offrl_jax.cli import OneLineParser, positive_int
+from offrl_jax.system.cli import OneLineParser, positive_int
 
 PARTS = ("matmul", "layernorm", "activation", "sampling", "loss", "update", "other")
 _DEF = re.compile(r"^\s*(?:ROOT )?%([\w.\-]+) = (\w+)\[([\d,]*)\]\S* (\w[\w\-]*)\((.*)$")
@@ -202,6 +202,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    from offrl_jax.cli import run_main
+    from offrl_jax.system.cli import run_main
 
     run_main(main)

@@ -1,8 +1,8 @@
 """One variant of S seeds on both cores: how its updates per second scale with S, on 1 core and on 2.
 
 Each case trains TD3+BC offline RL (hopper-shaped synthetic data, batch 256, 2x256 LayerNorm nets, alpha 2.5) with
-S vmapped seeds through the driver, times `--chunks` chunks of `--updates` updates after one warm-up chunk, and
-reports the updates per second summed over the seeds:
+S seeds (the member axis) through the driver, times `--chunks` chunks of `--updates` updates after one warm-up chunk,
+and reports the updates per second summed over the seeds:
 
     1core         one process pinned to one core, single-threaded XLA (the unit: what one core does)
     default       one process, XLA's default thread pool, not pinned (what a single variant gets today)
@@ -27,8 +27,8 @@ import subprocess
 import sys
 import time
 
-from offrl_jax.cli import OneLineParser, int_at_least, positive_int
-from offrl_jax.workers import SINGLE_THREAD_XLA
+from offrl_jax.system.cli import OneLineParser, int_at_least, positive_int
+from offrl_jax.system.workers import SINGLE_THREAD_XLA
 
 CASES = ("1core", "default", "2devices", "2processes")
 
@@ -56,8 +56,7 @@ def _measure(seeds: int, updates: int, chunks: int, members: str | None = None) 
 
 def _worker(args) -> None:
     if args.process_id is not None:
-        from offrl_jax import distributed
-
+        from offrl_jax.system import distributed
         distributed.initialize(f"localhost:{args.port}", 2, args.process_id)
     result = _measure(args.seeds[0], args.updates, args.chunks, args.members)
     if args.process_id in (None, 0):
@@ -135,6 +134,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    from offrl_jax.cli import run_main
+    from offrl_jax.system.cli import run_main
 
     run_main(main)

@@ -2,8 +2,8 @@
 
     python -m benchmarks.throughput [--algo A ...] [--seeds S ...] [--json] [--quick] [--out NAME]
 
-For each case (algorithm, phase, ensemble size) and each S vmapped seeds: `offrl_jax.driver.make_chunk_fn` on a
-synthetic 100k-transition hopper-shaped dataset (obs 11, act 3), batch 256, default network sizes; compile time
+For each case (algorithm, phase, ensemble size) and each S seeds (the member axis): `offrl_jax.driver.make_chunk_fn` on
+a synthetic 100k-transition hopper-shaped dataset (obs 11, act 3), batch 256, default network sizes; compile time
 (trace + lower + XLA compile) reported separately; one warm-up chunk, then the median of a few timed chunks.
 
     updates_per_s       gradient updates per second summed over the S seeds (one TD3 call = policy_delay updates)
@@ -17,7 +17,7 @@ Seeds are placed as `Driver` places them (`offrl_jax.driver.member_layout`): spl
 of the last seed when they do not divide; the copies' updates are not counted), the dataset replicated, and on each
 device run one after another (`--members map`, the CPU's default) or batched (`--members vmap`, elsewhere).  E.g.
 XLA_FLAGS="--xla_cpu_multi_thread_eigen=false --xla_force_host_platform_device_count=2" gives 2 single-threaded CPU
-devices, as the command line gives a process on 2 cores (`offrl_jax.workers.cpu_flags`).
+devices, as the command line gives a process on 2 cores (`offrl_jax.system.workers.cpu_flags`).
 
 Progress goes to stderr, results to stdout (a table, or one JSON object per line with --json).  `--out NAME` also
 appends them to results/benchmarks/NAME.jsonl (a run's first line: {"meta": {command, date, machine, load}}); an
@@ -42,9 +42,9 @@ import numpy as np
 
 from benchmarks.flops import chain_flops, update_flops
 from offrl_jax.algos import make_algorithm, make_config
-from offrl_jax.cli import OneLineParser, check_writable_file, number, positive_int
 from offrl_jax.data.dataset import Dataset
 from offrl_jax.driver import CHUNK, INIT, device_data, make_chunk_fn, member_layout, seed_keys
+from offrl_jax.system.cli import OneLineParser, check_writable_file, number, positive_int
 
 OBS_DIM, ACT_DIM, BATCH = 11, 3, 256  # hopper
 RESULTS_DIR = Path("results/benchmarks")
@@ -175,7 +175,7 @@ def init_states(case: Case, max_seeds: int, n_rows: int):
 
 def time_case(case: Case, seeds: int, data: dict[str, jax.Array], all_states, peak: float, expect_gflops: float,
               target_s: float, max_reps: int, heavy_s: float, mode: str | None = None) -> dict[str, Any]:
-    """Compile and time the chunk function of `case` for `seeds` vmapped seeds.
+    """Compile and time the chunk function of `case` for `seeds` seeds on the member axis.
 
     Chunk length: about `target_s` seconds at `expect_gflops`.  One warm-up chunk, then the median of `max_reps`
     timed chunks; a chunk predicted to take more than `heavy_s` seconds (at least one update call for every seed
@@ -327,7 +327,7 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     p.add_argument("--algo", nargs="+", choices=sorted({c.algo for c in CASES}), metavar="ALGO",
                    help="only these registry names: %(choices)s (default: all)")
     p.add_argument("--seeds", nargs="+", type=positive_int, default=None,
-                   help="vmapped seed counts (default 1 2 4 8)")
+                   help="seed counts on the member axis (default 1 2 4 8)")
     p.add_argument("--phase", nargs="+", choices=sorted({c.phase for c in CASES}), metavar="PHASE",
                    help="only these phase labels: %(choices)s (default: all)")
     p.add_argument("--num-critics", nargs="+", type=positive_int, help="only cases with these ensemble sizes")
@@ -443,6 +443,6 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
 
 
 if __name__ == "__main__":
-    from offrl_jax.cli import run_main
+    from offrl_jax.system.cli import run_main
 
     run_main(main)

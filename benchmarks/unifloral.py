@@ -50,8 +50,8 @@ import jax.numpy as jnp
 
 from benchmarks.throughput import ACT_DIM, BATCH, OBS_DIM, append_results, results_path, synthetic_data
 from offrl_jax.algos import make_algorithm, make_config
-from offrl_jax.cli import OneLineParser, positive_int
 from offrl_jax.driver import CHUNK, INIT, make_chunk_fn, member_layout, seed_keys
+from offrl_jax.system.cli import OneLineParser, positive_int
 
 MODULE = "unifloral_td3_bc"  # the name their imported td3_bc.py gets in sys.modules
 
@@ -250,6 +250,6 @@ def main(argv: list[str] | None = None) -> dict:
 
 
 if __name__ == "__main__":
-    from offrl_jax.cli import run_main
+    from offrl_jax.system.cli import run_main
 
     run_main(main)

@@ -9,7 +9,7 @@ variant, evaluation every 2.5k (4 variants: ~40 min on 2 cores).  The paper: 1M 
 from offrl_jax.algos import ALGOS
 from offrl_jax.app.command import run_command
 from offrl_jax.app.studies import PRETRAIN, make_study, parser, pretrain_variants
-from offrl_jax.cli import UsageError
+from offrl_jax.system.cli import UsageError
 
 
 def build(args):
@@ -30,6 +30,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    from offrl_jax.cli import run_main
+    from offrl_jax.system.cli import run_main
 
     run_main(main)

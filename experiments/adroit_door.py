@@ -18,8 +18,8 @@ from offrl_jax.algos import PRESETS, preset_values
 from offrl_jax.app.command import run_command
 from offrl_jax.app.flags import run_args
 from offrl_jax.app.studies import study_fields
-from offrl_jax.cli import OneLineParser, number, positive_int
-from offrl_jax.study import Study, Variant
+from offrl_jax.run.study import Study, Variant
+from offrl_jax.system.cli import OneLineParser, number, positive_int
 
 # label -> (algorithm, pre-training)
 VARIANTS = {
@@ -76,6 +76,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    from offrl_jax.cli import run_main
+    from offrl_jax.system.cli import run_main
 
     run_main(main)

@@ -5,7 +5,7 @@ independent uniform random policy, and compare with the paper's figures.
 
 Prints one row per env: time limit, episodes, mean return, its standard error, the paper's value and the difference
 in standard errors, and the mean return under the installed env's own reward (gymnasium-robotics >= 1.2.1 changed
-the door/hammer/relocate reward; the main columns use D4RL's original, `offrl_jax.adroit`).  With --out, writes
+the door/hammer/relocate reward; the main columns use D4RL's original, `offrl_jax.envs.adroit`).  With --out, writes
 scores.json and table.txt there.
 """
 from __future__ import annotations
@@ -19,9 +19,9 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from offrl_jax.app.outputs import refuse_existing
-from offrl_jax.checkpoint import atomic_write_text
-from offrl_jax.cli import OneLineParser, check_writable_dir, int_at_least, seed_int
-from offrl_jax.envs import ENVS, make_env
+from offrl_jax.envs.registry import ENVS, make_env
+from offrl_jax.system.checkpoint import atomic_write_text
+from offrl_jax.system.cli import OneLineParser, check_writable_dir, int_at_least, seed_int
 
 OUTPUTS = ("scores.json", "table.txt")  # what --out gets (--overwrite replaces only these)
 PAPER_TABLE4 = {"pen": -162.09, "door": -84.52, "hammer": -856.83, "relocate": -37.95}
@@ -83,6 +83,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    from offrl_jax.cli import run_main
+    from offrl_jax.system.cli import run_main
 
     run_main(main)

@@ -15,8 +15,8 @@ takes ~10 s per 1k updates, critic pre-training ~190-290 s and EDAC ~480 s, so t
 from offrl_jax.app.command import run_command
 from offrl_jax.app.flags import BATCH_SIZE
 from offrl_jax.app.studies import ENVS, LABELS, make_study, parser, pretrain_variants
-from offrl_jax.cli import positive_int
-from offrl_jax.study import Variant
+from offrl_jax.run.study import Variant
+from offrl_jax.system.cli import positive_int
 
 # Unless given on the command line: 3k soft BC + 9k soft-return critic updates.  The critic starts near 0 (EDAC's
 # 3e-3 output init) and needs ~5k Adam steps just to reach the returns' scale (~300 on hopper); with 3k (the default
@@ -66,6 +66,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    from offrl_jax.cli import run_main
+    from offrl_jax.system.cli import run_main
 
     run_main(main)

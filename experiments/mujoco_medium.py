@@ -6,7 +6,7 @@ actor+critic pre-training (10k updates) vs from scratch, 5 seeds (the member axi
 variants train at once (`--parallel 2`).  That budget is what fits five seeds, the fewest a reviewer accepts, in 30
 minutes on 2 idle CPU cores with the dataset generated first (23 min of training; 10 seeds take about twice as
 long: `--seeds 10`).  The final table gives every seed's updates to each threshold, the speed-up with its
-bootstrap interval and IQM scores (`offrl_jax.summary`).  TD3+BC's alpha is 2.5 here (the declared default preset
+bootstrap interval and IQM scores (`offrl_jax.run.summary`).  TD3+BC's alpha is 2.5 here (the declared default preset
 `published`: TD3+BC's published alpha, with which the from-scratch baseline learns on this data); the paper's
 per-env alphas (hopper 10) come with `--preset authors` or `--alpha 10`.  See RESULTS.md for the measured
 wall-clock time and for what happens with longer budgets (`--updates 300000`).
@@ -22,8 +22,8 @@ from __future__ import annotations
 
 from offrl_jax.app.command import run_command
 from offrl_jax.app.studies import ENVS, HPARAM_DESTS, given, make_study, parser
-from offrl_jax.cli import UsageError
-from offrl_jax.study import Study
+from offrl_jax.run.study import Study
+from offrl_jax.system.cli import UsageError
 
 PRESET_FIXED = ("env", "algo", "level", "updates", "eval_every")  # what --preset paper sets itself
 
@@ -51,6 +51,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    from offrl_jax.cli import run_main
+    from offrl_jax.system.cli import run_main
 
     run_main(main)

@@ -1,6 +1,6 @@
 """Appendix E: pre-training on the medium-replay and full-replay datasets (TD3+BC, with and without).
 
-These datasets come from the SAC training runs (`python -m offrl_jax.datasets generate hopper-medium-replay`
+These datasets come from the SAC training runs (`python -m offrl_jax.data generate hopper-medium-replay`
 trains SAC to the medium checkpoint first if it has not been run).  Default (sized for a 2-core CPU): hopper
 medium-replay, 3 seeds, 30k updates per variant, evaluation every 2.5k.  full-replay is every transition of
 the 1M-step SAC run that produced the shipped `<env>-expert` checkpoint: it needs that checkpoint, and reads the run
@@ -31,6 +31,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    from offrl_jax.cli import run_main
+    from offrl_jax.system.cli import run_main
 
     run_main(main)

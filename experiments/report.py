@@ -2,7 +2,7 @@
 
     python -m experiments.report results/mujoco_medium/default results/figure2/*/
 
-Per run directory, the study's tables (`offrl_jax.summary`): per variant the final score, the last evaluation and
+Per run directory, the study's tables (`offrl_jax.run.summary`): per variant the final score, the last evaluation and
 the mean over the run as IQM over seeds with stratified-bootstrap 95 % intervals; against the from-scratch variant,
 every seed's updates to each threshold (censored seeds counted at the budget), the speed-up with its interval, the
 probability of improvement and the verdict on the paper's claim.  A run with config.json and curves.csv is
@@ -10,7 +10,7 @@ re-summarised from them, so runs made before these statistics existed get them t
 studies (sub-directories with a summary.json each) gives one table per study.  `--curves` adds the seed-mean score
 at every evaluation (rows: variants, columns: updates) from the run's curves.csv.
 
-Given several studies, a last table aggregates them, each a task (`offrl_jax.aggregate`): IQM and mean of the final
+Given several studies, a last table aggregates them, each a task (`offrl_jax.run.aggregate`): IQM and mean of the final
 scores of every run with stratified-bootstrap intervals, and the probability of improvement of each variant over
 its reference averaged over tasks; `--aggregate FIG.png` draws it (interval bars, performance profiles, IQM
 sample-efficiency curves) as FIG.png and FIG.pdf:
@@ -18,13 +18,13 @@ sample-efficiency curves) as FIG.png and FIG.pdf:
     python -m experiments.report results/figure2/*-td3bc results/mujoco_medium/default --aggregate td3bc.png
 
 `--merge OUT` first merges the given run directories (one study, each run training some of its variants, e.g. one
-process per variant on a GPU) into OUT, re-summarised across them (`offrl_jax.results.merge_runs`), and reports OUT:
+process per variant on a GPU) into OUT, re-summarised across them (`offrl_jax.run.results.merge_runs`), and reports OUT:
 
     python -m experiments.report --merge runs/door-all runs/door-BC runs/door-CQL
 
 `--plot FIG.png` draws every study given as one panel of one figure (and FIG.pdf beside it), laid out as the
 paper's Figure 2 (rows: environments, columns: algorithms) when each (environment, algorithm) is one study, or all
-in one panel with `--overlay` (`offrl_jax.figures`):
+in one panel with `--overlay` (`offrl_jax.run.figures`):
 
     python -m experiments.report results/figure2/*-td3bc results/figure2/*-edac --plot figure2.png
 """
@@ -36,12 +36,12 @@ import sys
 from collections import defaultdict
 from pathlib import Path
 
-from offrl_jax.aggregate import aggregate, aggregate_table, arms, claims_table, plot_aggregate
-from offrl_jax.cli import OneLineParser, check_writable_dir, check_writable_file, print_error
-from offrl_jax.figures import behaviour_score, plot_studies
-from offrl_jax.results import check_curve_seeds, read_curves, short_curves
-from offrl_jax.study import Study
-from offrl_jax.summary import merge_runs, resummarize, summary_table as table
+from offrl_jax.run.aggregate import aggregate, aggregate_table, arms, claims_table, plot_aggregate
+from offrl_jax.run.figures import behaviour_score, plot_studies
+from offrl_jax.run.results import check_curve_seeds, read_curves, short_curves
+from offrl_jax.run.study import Study
+from offrl_jax.run.summary import merge_runs, resummarize, summary_table as table
+from offrl_jax.system.cli import OneLineParser, check_writable_dir, check_writable_file, print_error
 
 
 def summaries(path: Path) -> list[Path]:
@@ -206,6 +206,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    from offrl_jax.cli import run_main
+    from offrl_jax.system.cli import run_main
 
     run_main(main)

@@ -15,8 +15,8 @@ import json
 
 import numpy as np
 
-from offrl_jax.cli import OneLineParser
 from offrl_jax.data.returns import returns_to_go
+from offrl_jax.system.cli import OneLineParser
 
 RIGHT, LEFT = "->", "<-"
 # (s, a, r, s', terminal) in trajectory order
@@ -71,6 +71,6 @@ def main(argv: list[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    from offrl_jax.cli import run_main
+    from offrl_jax.system.cli import run_main
 
     run_main(main)

@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from offrl_jax.app.outputs import refuse_existing
-from offrl_jax.checkpoint import atomic_write_bytes, atomic_write_text
-from offrl_jax.cli import OneLineParser, check_writable_dir, int_at_least, number, positive_int, seed_int
+from offrl_jax.system.checkpoint import atomic_write_bytes, atomic_write_text
+from offrl_jax.system.cli import OneLineParser, check_writable_dir, int_at_least, number, positive_int, seed_int
 
 OUTPUTS = ("rows.json", "summary.json", "theory.png")  # what --out gets (--overwrite replaces only these)
 
@@ -191,6 +191,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    from offrl_jax.cli import run_main
+    from offrl_jax.system.cli import run_main
 
     run_main(main)

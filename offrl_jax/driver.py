@@ -4,7 +4,7 @@ sampling minibatches on the device inside the scan, for S seeds (members) at onc
 Where the members go (`member_layout`): split over the devices (`jax.shard_map` over a 1-D mesh), and on each device
 batched with `jax.vmap` (GPU, TPU) or run one after another with `lax.map` (CPU, where batched matmuls are slower
 than plain ones: +24 % TD3+BC updates/s at S = 4 on one core, benchmarks/README.md).  On the CPU the command line
-gives a process one single-threaded XLA device per core (`offrl_jax.workers.cpu_flags`), so one run of S seeds fills
+gives a process one single-threaded XLA device per core (`system.workers.cpu_flags`), so one run of S seeds fills
 every core.  Members that do not divide over the devices are padded with copies of the last one, whose results are
 dropped.
 
@@ -38,7 +38,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
 from offrl_jax.algos.common import Phase, with_hparams
 from offrl_jax.data.dataset import Dataset, normalize_obs
 from offrl_jax.data.returns import returns_to_go
-from offrl_jax.distributed import to_host
+from offrl_jax.system.distributed import to_host
 
 DATA_FIELDS = ("observations", "actions", "rewards", "next_observations", "terminals", "timeouts", "returns")
 # on the device only for an algorithm that reads them (`uses_next_actions`): ReBRAC's critic penalty

@@ -26,9 +26,9 @@ import numpy as np
 from flax import serialization
 
 from offrl_jax.algos import make_algorithm, saved_config
-from offrl_jax.envs import get_env_spec
-from offrl_jax.resume import checkpoint_differences, checkpoint_path, kept_updates, shape_mismatch
-from offrl_jax.study import Study
+from offrl_jax.envs.registry import get_env_spec
+from offrl_jax.run.resume import checkpoint_differences, checkpoint_path, kept_updates, shape_mismatch
+from offrl_jax.run.study import Study
 
 
 @dataclasses.dataclass

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from offrl_jax.cli import (
+from offrl_jax.system.cli import (
     OneLineParser,
     check_writable_file,
     int_at_least,
@@ -32,7 +32,7 @@ from offrl_jax.cli import (
 
 def rollout(policy, episodes: int, video: Path | None = None, max_frames: int | None = None) -> np.ndarray:
     """Undiscounted returns of `episodes` episodes (episode e reset with seed e); frames to `video` if given."""
-    from offrl_jax.envs import make_env
+    from offrl_jax.envs.registry import make_env
 
     env = make_env(policy.env, disable_env_checker=True, **({"render_mode": "rgb_array"} if video else {}))
     returns, frames = [], []
@@ -101,7 +101,7 @@ def main(argv: list[str] | None = None) -> int:
                 raise ValueError(f"{args.video} exists; pass --overwrite to replace it")
             check_writable_file(args.video)
             os.environ.setdefault("MUJOCO_GL", "egl")  # before MuJoCo is imported
-        from offrl_jax.envs import normalized_score
+        from offrl_jax.envs.registry import normalized_score
         from offrl_jax.policy import load_policy
 
         policy = load_policy(args.run, args.variant, args.seed, args.checkpoint)
@@ -121,6 +121,6 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    from offrl_jax.cli import run_main
+    from offrl_jax.system.cli import run_main
 
     run_main(main)

@@ -23,7 +23,7 @@ SERVER = r'''
 import atexit, json, os, runpy, signal, sys, time, traceback
 import jax, flax, optax  # noqa: F401 -- imported once, before any fork; no backend is started here
 import offrl_jax.app.command, offrl_jax.app.studies, offrl_jax.policy, offrl_jax.data.readers  # noqa: F401
-from offrl_jax.interrupts import quiet_start
+from offrl_jax.system.interrupts import quiet_start
 
 def child(req):
     for fd, path, flags in ((0, os.devnull, os.O_RDONLY), (1, req["stdout"], os.O_WRONLY | os.O_TRUNC),
@@ -33,7 +33,9 @@ def child(req):
     sys.argv = ["-m"]
     quiet_start()  # what a package's __init__ does for `python -m`
     sys.argv = [req["module"], *req["args"]]
-    sys.modules.pop(req["module"], None)  # run as __main__, not found already imported (runpy would warn)
+    # run as __main__, not found already imported (runpy would warn); a package runs its __main__ submodule
+    main = req["module"] + ".__main__" if hasattr(sys.modules.get(req["module"]), "__path__") else req["module"]
+    sys.modules.pop(main, None)
     code = 0
     try:
         runpy.run_module(req["module"], run_name="__main__", alter_sys=True)

@@ -117,9 +117,9 @@ def test_cli_auto_and_cap():
 def test_run_study_records_the_hand_over(tmp_path, tiny_dataset):
     import json
 
-    from offrl_jax.results import read_curves
-    from offrl_jax.runner import run_study
-    from offrl_jax.study import Study, Variant
+    from offrl_jax.run.results import read_curves
+    from offrl_jax.run.runner import run_study
+    from offrl_jax.run.study import Study, Variant
 
     # tol 1: any window that is not worse by more than 100 % is "flat", so pre-training ends at its 2nd window
     variant = Variant.of("auto", "td3bc", pretrain_auto=True, pretrain_auto_window=100, pretrain_auto_tol=1.0,

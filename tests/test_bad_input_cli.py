@@ -114,7 +114,7 @@ def test_a_config_integer_is_read_as_counts_are():
     """A config's integer field takes "1e6" as --updates does (its range is the config's to check)."""
     import argparse
 
-    from offrl_jax.cli import integer
+    from offrl_jax.system.cli import integer
     assert (integer("1e6"), integer("-3"), integer("0")) == (1_000_000, -3, 0)
     for text in ("2.5", "1e40", "nan", ""):
         with pytest.raises(argparse.ArgumentTypeError):
@@ -123,7 +123,7 @@ def test_a_config_integer_is_read_as_counts_are():
 
 @pytest.mark.parametrize("module, args", [
     ("experiments.mujoco_medium", ["--dataset-path", "/tmp/a\nb.hdf5"]),
-    ("offrl_jax.datasets", ["info", "/tmp/a\nb.hdf5"]),
+    ("offrl_jax.data", ["info", "/tmp/a\nb.hdf5"]),
     ("experiments.report", ["/tmp/a\nb"]),
 ])
 def test_a_newline_in_a_path_stays_on_the_one_error_line(module, args):
@@ -202,10 +202,10 @@ def test_datasets_generate_refuses_an_existing_dataset_without_overwrite(tmp_pat
     out = tmp_path / "ds"
     out.mkdir()
     (out / "keep").write_text("x")
-    line = _one_line_error("offrl_jax.datasets", "generate", "hopper-medium", "--out", str(out))
+    line = _one_line_error("offrl_jax.data", "generate", "hopper-medium", "--out", str(out))
     assert "--overwrite" in line and (out / "keep").read_text() == "x"
     (tmp_path / "file").write_text("x")
-    assert "is a file" in _one_line_error("offrl_jax.datasets", "generate", "hopper-medium", "--out",
+    assert "is a file" in _one_line_error("offrl_jax.data", "generate", "hopper-medium", "--out",
                                           str(tmp_path / "file"), "--overwrite")
 
 

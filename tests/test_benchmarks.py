@@ -90,6 +90,7 @@ def test_handwritten_fused_layer_norm_vjp_matches_autodiff():
         np.testing.assert_allclose(got, want, rtol=1e-4, atol=1e-5)
 
 
+@pytest.mark.slow  # a one-off question whose answer benchmarks/README.md records
 def test_handwritten_runs_unrolled_seeds():
     from benchmarks.handwritten import run
 
@@ -111,6 +112,7 @@ def test_device_check_runs_on_a_cpu_with_a_tiny_budget(tmp_path):
         assert c["updates_per_s"] > 0 and c["finite"] and "pct_of_fp32_matmul" in c and "peak_memory_bytes" in c
 
 
+@pytest.mark.slow  # two fresh JAX processes; the answer is in benchmarks/README.md
 def test_scaling_runs_its_cases_at_a_tiny_size(capsys):
     from benchmarks.scaling import main
 
@@ -180,6 +182,7 @@ def test_profile_counts_a_matmuls_flops_from_the_optimised_hlo():
     assert matmuls and sum(dot_flops(hlo, n) for n in matmuls) == 2 * 4 * 8 * 16
 
 
+@pytest.mark.slow  # a profiler trace; the answer is in benchmarks/README.md
 def test_profile_attributes_a_td3bc_update(capsys):
     from benchmarks.profile import main
 
@@ -261,16 +264,16 @@ def test_results_path_names_and_markdown_of_an_appended_file(capsys, tmp_path, m
     ("handwritten", ["--calls", "0"], "--calls"),
     ("handwritten", ["--reps", "1.5"], "--reps"),
     ("handwritten", ["--mode", "single", "--seeds", "2"], "--mode single"),
-    ("torch_reference", ["--threads", "-1"], "--threads"),
-    ("torch_reference", ["--threads", "0"], "--threads"),
-    ("torch_reference", ["--reps", "-1"], "--reps"),
-    ("torch_reference", ["--algo"], "--algo"),
+    ("pytorch", ["--threads", "-1"], "--threads"),
+    ("pytorch", ["--threads", "0"], "--threads"),
+    ("pytorch", ["--reps", "-1"], "--reps"),
+    ("pytorch", ["--algo"], "--algo"),
     ("scaling", ["--process-id", "-1"], "--process-id"),
 ])
 def test_benchmark_refuses_a_bad_number_in_one_line(capsys, module, args, flag):
     import importlib
 
-    if module == "torch_reference":
+    if module == "pytorch":
         pytest.importorskip("torch")
     main = importlib.import_module(f"benchmarks.{module}").main
     assert flag in _refused(capsys, main, args)
@@ -279,21 +282,21 @@ def test_benchmark_refuses_a_bad_number_in_one_line(capsys, module, args, flag):
 @pytest.mark.parametrize("module, args", [
     ("memory", ["--seeds", "0"]),
     ("handwritten", ["--calls", "0"]),
-    ("torch_reference", ["--threads", "-1"]),
+    ("pytorch", ["--threads", "-1"]),
 ])
 def test_benchmark_command_bad_number_is_one_line_and_exit_2(tmp_path, module, args):
 
-    if module == "torch_reference":
+    if module == "pytorch":
         pytest.importorskip("torch")
     result = run_module(f"benchmarks.{module}", *args)
     assert result.returncode == 2 and result.stderr.count("\n") == 1, result.stderr
     assert result.stderr.startswith("error: ") and not result.stdout
 
 
-def test_torch_reference_usage_names_the_module(capsys):
+def test_pytorch_benchmark_usage_names_the_module(capsys):
     pytest.importorskip("torch")
-    from benchmarks.torch_reference import main
+    from benchmarks.pytorch import main
 
     with pytest.raises(SystemExit):
         main(["--help"])
-    assert capsys.readouterr().out.startswith("usage: benchmarks.torch_reference ")
+    assert capsys.readouterr().out.startswith("usage: benchmarks.pytorch ")

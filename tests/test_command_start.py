@@ -1,4 +1,4 @@
-"""The start and end of every command (offrl_jax.interrupts, offrl_jax.cli.run_main): a Ctrl-C at any moment, and an
+"""The start and end of every command (system.interrupts, system.cli.run_main): a Ctrl-C at any moment, and an
 XLA_FLAGS that JAX cannot start with, are one line and a non-zero exit, never a traceback, and never lost."""
 import os
 import signal
@@ -48,8 +48,8 @@ def test_an_import_for_other_purposes_keeps_python_s_ctrl_c():
 
 def test_run_main_gives_ctrl_c_back_to_the_command_and_reports_one_it_leaves():
     result = python("import sys; sys.argv[0] = '-m'; import experiments, os, signal, time\n"
-                    "from offrl_jax.cli import run_main\n"
-                    "from offrl_jax.interrupts import during_command\n"
+                    "from offrl_jax.system.cli import run_main\n"
+                    "from offrl_jax.system.interrupts import during_command\n"
                     "def main():\n"
                     "    assert signal.getsignal(signal.SIGINT) is during_command\n"
                     "    os.kill(os.getpid(), signal.SIGINT); time.sleep(30)\n"
@@ -63,7 +63,7 @@ def test_ctrl_c_inside_an_import_or_a_gc_callback_comes_again_after_it():
     initialised and crash the process, and inside JAX's garbage-collection callback Python drops it: there the
     handler sends the Ctrl-C again 50 ms later, so it lands after the import."""
     result = python("import sys; sys.argv[0] = '-m'; import experiments, os, signal, time, importlib.util\n"
-                    "from offrl_jax.cli import run_main\n"
+                    "from offrl_jax.system.cli import run_main\n"
                     "def main():\n"
                     "    open('/dev/null').close()\n"
                     "    spec = importlib.util.spec_from_loader('slow', loader=None)\n"

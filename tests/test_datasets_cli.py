@@ -1,4 +1,4 @@
-"""`offrl_jax.datasets`: `load` by name / path (generator faked), and the CLI (`list`, `info`, `generate`) including
+"""`data.catalogue`: `load` by name / path (generator faked), and the CLI (`list`, `info`, `generate`) including
 its error contract: exit status 2, one line on stderr starting with "error:", no traceback."""
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ import h5py
 import numpy as np
 import pytest
 
-from offrl_jax import datasets
+from offrl_jax.data import catalogue
 from offrl_jax.data.dataset import DatasetError
 from tests.entry import run_module
 
@@ -22,7 +22,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def run_cli(*args, env=None):
-    return run_module("offrl_jax.datasets", *args, cwd=REPO, timeout=120, env=env)
+    return run_module("offrl_jax.data", *args, cwd=REPO, timeout=120, env=env)
 
 
 def assert_cli_error(result, *fragments):
@@ -54,13 +54,13 @@ def write_d4rl(path, T=20, obs_dim=11, act_dim=3, nan=False, big_action=False):
 def test_known_names():
     for env in ("hopper", "halfcheetah", "walker2d"):
         for kind in ("random", "medium", "medium-replay", "full-replay", "expert", "medium-expert"):
-            assert f"{env}-{kind}" in datasets.KNOWN
-    assert {"door-human", "door-cloned"} <= set(datasets.KNOWN)
+            assert f"{env}-{kind}" in catalogue.KNOWN
+    assert {"door-human", "door-cloned"} <= set(catalogue.KNOWN)
 
 
 def test_load_unknown_name():
     with pytest.raises(DatasetError, match="known names: .*hopper-medium"):
-        datasets.load("hopper-mediocre")
+        catalogue.load("hopper-mediocre")
 
 
 def test_load_generates_once_then_reads_cache(tmp_path, monkeypatch):
@@ -84,47 +84,47 @@ def test_load_generates_once_then_reads_cache(tmp_path, monkeypatch):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             ds = minari.create_dataset_from_buffers(f"gen/{name}-v0", buffer, env=gym.spec("Hopper-v5"))
-        out = Path(out_dir) if out_dir is not None else datasets.cached_path(name)
+        out = Path(out_dir) if out_dir is not None else catalogue.cached_path(name)
         out.parent.mkdir(parents=True, exist_ok=True)
         Path(ds.storage.data_path).parent.rename(out)
         return out
 
     monkeypatch.setitem(sys.modules, "offrl_jax.data.generate", types.SimpleNamespace(generate=fake_generate))
     with pytest.raises(DatasetError, match="not generated yet"):
-        datasets.load("hopper-medium", generate_if_missing=False)
+        catalogue.load("hopper-medium", generate_if_missing=False)
     # a capped load of a dataset that is not cached generates just that many transitions, and not into the cache
-    ds = datasets.load("hopper-medium", max_transitions=30)
+    ds = catalogue.load("hopper-medium", max_transitions=30)
     assert (len(ds), ds.env, ds.name) == (30, "hopper", "hopper-medium") and len(calls) == 1
     assert calls[0][1] == 30 and calls[0][2] is not None and not Path(calls[0][2]).exists()  # a deleted temporary
     assert "not cached" in calls[0][4]  # what its [generate] line names instead of the deleted directory
-    assert not datasets.is_cached("hopper-medium")
+    assert not catalogue.is_cached("hopper-medium")
     # a full load generates into the cache; a capped load then takes the first rows of the cached one
     T = 40
     calls.clear()
     monkeypatch.setitem(sys.modules, "offrl_jax.data.generate", types.SimpleNamespace(
         generate=lambda name, transitions=None, out_dir=None, seed=0: fake_generate(name, T, out_dir, seed)))
-    assert len(datasets.load("hopper-medium")) == 40 and datasets.is_cached("hopper-medium")
-    assert len(datasets.load("hopper-medium", max_transitions=30)) == 30 and len(calls) == 1
-    assert not datasets.is_cached("hopper-expert")
+    assert len(catalogue.load("hopper-medium")) == 40 and catalogue.is_cached("hopper-medium")
+    assert len(catalogue.load("hopper-medium", max_transitions=30)) == 30 and len(calls) == 1
+    assert not catalogue.is_cached("hopper-expert")
 
 
 def test_load_without_generator(tmp_path, monkeypatch):
     monkeypatch.setenv("OFFRL_JAX_CACHE", str(tmp_path))
     monkeypatch.setitem(sys.modules, "offrl_jax.data.generate", None)  # import fails
     with pytest.raises(DatasetError, match="generator is not available"):
-        datasets.load("walker2d-random", max_transitions=10)
+        catalogue.load("walker2d-random", max_transitions=10)
 
 
 def test_load_path(tmp_path):
-    ds = datasets.load(write_d4rl(tmp_path / "hopper-small.hdf5"))
+    ds = catalogue.load(write_d4rl(tmp_path / "hopper-small.hdf5"))
     assert (len(ds), ds.env, len(ds.episode_returns())) == (20, "hopper", 2)
 
 
 # ------------------------------------------------------------------------------------------------------ CLI
 @pytest.fixture(scope="module")
 def door_available():
-    if not datasets.door_human_path().is_file():
-        pytest.skip(f"shared door demonstrations not found at {datasets.door_human_path()}")
+    if not catalogue.door_human_path().is_file():
+        pytest.skip(f"shared door demonstrations not found at {catalogue.door_human_path()}")
 
 
 def test_cli_info_door_human(door_available):
@@ -152,7 +152,7 @@ def test_cli_list(tmp_path):
     first, *rest = result.stdout.splitlines()
     lines = {line.split()[0]: line for line in rest}
     assert first.startswith("cache: ")
-    assert set(lines) == set(datasets.KNOWN) and "not cached" in lines["hopper-medium"]
+    assert set(lines) == set(catalogue.KNOWN) and "not cached" in lines["hopper-medium"]
     assert lines["door-human"].split()[1] == "shipped"
 
 
@@ -189,12 +189,12 @@ def test_cli_usage_error():
 def test_door_human_ships_with_the_package_and_needs_no_shared_folder(tmp_path):
     """From a directory with no ../shared and no $OFFRL_JAX_SHARED: the packaged copy (DAPG, Apache-2.0)."""
     env = {k: v for k, v in os.environ.items() if k != "OFFRL_JAX_SHARED"}
-    result = subprocess.run([sys.executable, "-m", "offrl_jax.datasets", "info", "door-human"], cwd=tmp_path,
+    result = subprocess.run([sys.executable, "-m", "offrl_jax.data", "info", "door-human"], cwd=tmp_path,
                             env=env | {"PYTHONPATH": str(REPO)}, capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr
     info = json.loads(result.stdout)
     assert info["transitions"] == 6729 and info["episodes"] == 25
-    assert datasets.PACKAGED.is_file() and (datasets.PACKAGED.parent / "README.md").is_file()
+    assert catalogue.PACKAGED.is_file() and (catalogue.PACKAGED.parent / "README.md").is_file()
 
 
 def test_an_npz_with_d4rl_keys_reads_as_a_d4rl_file(tmp_path):
@@ -207,7 +207,7 @@ def test_an_npz_with_d4rl_keys_reads_as_a_d4rl_file(tmp_path):
              rewards=rng.normal(size=T), terminals=terminals)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # no timeouts key: inferred, with a warning
-        ds = datasets.load(path)
+        ds = catalogue.load(path)
     assert ds.env == "hopper" and len(ds) == T and ds.terminals.sum() == 1
 
 

@@ -26,7 +26,7 @@ def test_user_facing_text_has_no_process_words():
 
 
 @pytest.mark.parametrize("module", ["experiments.mujoco_medium", "experiments.figure2", "experiments.report",
-                                    "offrl_jax.rollout", "offrl_jax.datasets", "benchmarks.throughput"])
+                                    "offrl_jax.rollout", "offrl_jax.data", "benchmarks.throughput"])
 def test_help_has_no_process_words(module):
     result = run_module(module, "--help", timeout=120)
     assert result.returncode == 0 and result.stdout.strip()

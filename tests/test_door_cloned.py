@@ -1,4 +1,4 @@
-"""Adroit original-reward wrapper (offrl_jax.adroit); door-cloned generation (offrl_jax.data.generate.door_cloned)."""
+"""Adroit original-reward wrapper (envs.adroit); door-cloned generation (data.generate.door_cloned)."""
 from __future__ import annotations
 
 import json
@@ -7,9 +7,9 @@ import warnings
 import numpy as np
 import pytest
 
-from offrl_jax.adroit import OriginalAdroitReward, with_original_reward
-from offrl_jax.datasets import door_human_path, load
-from offrl_jax.envs import make_env
+from offrl_jax.data.catalogue import door_human_path, load
+from offrl_jax.envs.adroit import OriginalAdroitReward, with_original_reward
+from offrl_jax.envs.registry import make_env
 
 needs_demos = pytest.mark.skipif(not door_human_path().is_file(), reason="no door human demonstrations")
 

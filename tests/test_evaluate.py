@@ -5,7 +5,7 @@ import threading
 import jax.numpy as jnp
 import numpy as np
 
-from offrl_jax import evaluate as ev
+from offrl_jax.envs import evaluate as ev
 
 
 def _linear_policy():

@@ -87,7 +87,7 @@ def test_existing_output_is_never_overwritten(tmp_path, tiny_hdf5):
 
 
 def test_overwrite_replaces_an_earlier_run_only_once_the_new_one_can_start(tmp_path, tiny_hdf5):
-    from offrl_jax.study import Study, Variant
+    from offrl_jax.run.study import Study, Variant
 
     out = tmp_path / "run"
     out.mkdir()
@@ -210,8 +210,8 @@ def test_parallel_variants_equal_one_after_another(tmp_path, tiny_hdf5):
 def test_vmapped_alpha_sweep_equals_separate_runs(tmp_path, tiny_dataset):
     import dataclasses
 
-    from offrl_jax.runner import run_study
-    from offrl_jax.study import Study, Variant
+    from offrl_jax.run.runner import run_study
+    from offrl_jax.run.study import Study, Variant
 
     variants = tuple(Variant.of(f"alpha={a:g}", "td3bc", pretrain="none", alpha=a, hidden=(32, 32))
                      for a in (1.0, 10.0))
@@ -269,7 +269,7 @@ def test_debug_variable_shows_the_traceback(tmp_path):
 def test_a_run_directory_has_one_writer(tmp_path, tiny_hdf5):
     """While one process holds a run directory, a second one started on it (even with --overwrite, or --resume)
     gets one line and exit 2, and writes nothing."""
-    from offrl_jax.cli import lock_run_dir
+    from offrl_jax.system.cli import lock_run_dir
 
     out = tmp_path / "run"
     held = lock_run_dir(out)
@@ -286,8 +286,7 @@ def test_a_run_directory_has_one_writer(tmp_path, tiny_hdf5):
 def test_written_files_follow_the_umask(tmp_path, monkeypatch):
     import stat
 
-    from offrl_jax import checkpoint
-
+    from offrl_jax.system import checkpoint
     for mask, mode in ((0o022, 0o644), (0o077, 0o600)):
         monkeypatch.setattr(checkpoint, "_UMASK", mask)
         checkpoint.atomic_write_text(tmp_path / "x.json", "{}")
@@ -305,7 +304,7 @@ def test_a_failed_run_leaves_no_empty_directories(tmp_path):
 def test_warnings_print_as_one_line(capsys):
     import warnings
 
-    from offrl_jax.cli import one_line_warnings
+    from offrl_jax.system.cli import one_line_warnings
 
     saved = warnings.showwarning
     try:

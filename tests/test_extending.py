@@ -57,7 +57,6 @@ def test_every_config_field_has_a_flag():
 
 def test_registry_example_makes_a_checked_config(doc_namespace):
     from offrl_jax import algos
-
     assert "td3bc_maxmc" in algos.ALGOS and "td3bc_maxmc" not in ALGOS
     config = algos.make_config("td3bc_maxmc", "hopper")
     assert config.target == "max_mc" and config.pretrain == "none" and config.alpha == 10.0  # hopper's alpha
@@ -86,9 +85,9 @@ def test_new_family_example_runs_through_the_runner(doc_namespace, tmp_path, tin
     import json
 
     from offrl_jax import algos
-    from offrl_jax.results import read_curves
-    from offrl_jax.runner import run_study
-    from offrl_jax.study import Study, Variant
+    from offrl_jax.run.results import read_curves
+    from offrl_jax.run.runner import run_study
+    from offrl_jax.run.study import Study, Variant
 
     assert "mse_bc" in algos.FAMILIES and "mse_bc" not in FAMILIES
     with pytest.raises(ValueError, match="MSEBCConfig.weight_decay = -1.0 must be >= 0"):
@@ -109,9 +108,9 @@ def test_new_family_example_runs_through_the_runner(doc_namespace, tmp_path, tin
 def test_a_run_resolves_each_config_once(monkeypatch, tmp_path, tiny_dataset):
     """A variant's config is built once, when its study is: the runner, the summary and the resume check read it
     from the study."""
-    from offrl_jax import study as study_module
-    from offrl_jax.runner import run_study
-    from offrl_jax.study import Study, Variant
+    from offrl_jax.run import study as study_module
+    from offrl_jax.run.runner import run_study
+    from offrl_jax.run.study import Study, Variant
 
     calls = []
     real = study_module.make_config

@@ -4,7 +4,7 @@ from __future__ import annotations
 import struct
 from pathlib import Path
 
-from offrl_jax.figures import panel_grid
+from offrl_jax.run.figures import panel_grid
 
 ROOT = Path(__file__).resolve().parents[1]
 RUNS = [ROOT / "results" / "figure2" / name for name in ("halfcheetah-td3bc", "walker2d-td3bc", "hopper-edac")]
@@ -35,7 +35,7 @@ def test_overlay_draws_every_study_in_one_panel(tmp_path):
 
 
 def test_update_ticks_read_as_20k_and_1m():
-    from offrl_jax.figures import updates_label
+    from offrl_jax.run.figures import updates_label
 
     assert [updates_label(x) for x in (0, 2500, 20_000, 1_000_000, 1_500_000)] == ["0", "2.5k", "20k", "1M", "1.5M"]
 

@@ -166,13 +166,12 @@ def test_default_cache_dir_is_a_minari_id_that_minari_lists(tmp_path, monkeypatc
     monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "datasets"))
     assert "hopper-medium-v0" in minari.list_local_datasets()
     assert minari.load_dataset("hopper-medium-v0").total_steps == 1000
-    from offrl_jax import datasets
-
+    from offrl_jax.data import catalogue
     with pytest.warns(UserWarning, match="generated capped at 1,000 transitions"):  # a full-size run is told
-        assert len(datasets.load("hopper-medium")) == 1000
+        assert len(catalogue.load("hopper-medium")) == 1000
     monkeypatch.delenv("MINARI_DATASETS_PATH")
     with pytest.warns(UserWarning, match="capped"):  # its Minari id, as Minari writes it, names it too
-        assert datasets.load("hopper-medium-v0").name == "hopper-medium"
+        assert catalogue.load("hopper-medium-v0").name == "hopper-medium"
     out.rename(tmp_path / "datasets" / "hopper-medium")  # a cache from before the -v0 suffix is moved, not redone
     assert dataset_dir("hopper-medium") == out and (out / "data" / "metadata.json").is_file()
 
@@ -213,7 +212,7 @@ def test_shipped_expert_behaves_like_an_expert(name):
     policies.json records for it (20 episodes) and well above medium; medium-expert is the medium rows, then the
     expert rows."""
     from offrl_jax.data.generate import build
-    from offrl_jax.envs import normalized_score
+    from offrl_jax.envs.registry import normalized_score
 
     env = name.split("-")[0]
     ds, source = build(name, transitions=2000, progress=False, num_envs=2)

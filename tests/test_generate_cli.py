@@ -80,7 +80,7 @@ def test_sac_refuses_bad_input_before_writing_anything(tmp_path, capsys, args, m
 
 
 def test_sac_refuses_a_run_directory_another_process_writes(tmp_path, capsys):
-    from offrl_jax.cli import lock_run_dir
+    from offrl_jax.system.cli import lock_run_dir
 
     held = lock_run_dir(tmp_path / "out")  # as a running `sac --out tmp/out` holds it
     try:

@@ -77,9 +77,9 @@ def test_value_pretraining_reaches_the_behaviour_value_of_two_states():
 
 
 def test_pretrained_iql_runs_through_the_runner(tmp_path, tiny_dataset):
-    from offrl_jax.results import read_curves
-    from offrl_jax.runner import run_study
-    from offrl_jax.study import Study, Variant
+    from offrl_jax.run.results import read_curves
+    from offrl_jax.run.runner import run_study
+    from offrl_jax.run.study import Study, Variant
 
     study = Study(name="t", dataset="synthetic", env="hopper", seeds=(0,), updates=400, eval_every=200,
                   eval_episodes=1, batch_size=32,

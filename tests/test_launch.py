@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-from offrl_jax.workers import SINGLE_THREAD_XLA, USER_XLA_FLAGS, cpu_flags
+from offrl_jax.system.workers import SINGLE_THREAD_XLA, USER_XLA_FLAGS, cpu_flags
 
 
 def test_one_single_threaded_device_per_core_and_the_users_flags_last():

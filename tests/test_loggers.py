@@ -1,4 +1,4 @@
-"""Run tracking (`offrl_jax.loggers`): what a logger is sent, TensorBoard and wandb (offline) end to end, and the
+"""Run tracking (`offrl_jax.run.loggers`): what a logger is sent, TensorBoard and wandb (offline) end to end, and the
 plain progress lines of --no-progress."""
 from __future__ import annotations
 
@@ -6,9 +6,9 @@ import math
 
 import pytest
 
-from offrl_jax.loggers import _Logger, make_logger
-from offrl_jax.runner import run_study
-from offrl_jax.study import Study, Variant
+from offrl_jax.run.loggers import _Logger, make_logger
+from offrl_jax.run.runner import run_study
+from offrl_jax.run.study import Study, Variant
 
 from .conftest import synthetic_dataset
 

@@ -69,22 +69,22 @@ def _dataset_look_alike(path: Path) -> Path:
                                         (_dataset_look_alike, "no data/metadata.json")])
 def test_generate_overwrite_refuses_a_directory_that_is_not_a_dataset(tmp_path, make, held):
     out = make(tmp_path / "target")
-    line = refused(tmp_path, "offrl_jax.datasets", "generate", "hopper-random", "--transitions", "100", "--out", out,
+    line = refused(tmp_path, "offrl_jax.data", "generate", "hopper-random", "--transitions", "100", "--out", out,
                    "--overwrite")
     assert line.startswith(f"error: {out} ") and held in line and "not a generated dataset" in line, line
 
 
 def test_generate_overwrite_replaces_a_generated_dataset(tmp_path):
     out = tmp_path / "ds"
-    run_ok("offrl_jax.datasets", "generate", "hopper-random", "--transitions", "100", "--out", out)
+    run_ok("offrl_jax.data", "generate", "hopper-random", "--transitions", "100", "--out", out)
     assert json.loads((out / "offrl_jax.json").read_text())["seed"] == 0
-    run_ok("offrl_jax.datasets", "generate", "hopper-random", "--transitions", "100", "--out", out, "--seed", "1",
+    run_ok("offrl_jax.data", "generate", "hopper-random", "--transitions", "100", "--out", out, "--seed", "1",
            "--overwrite")
     assert json.loads((out / "offrl_jax.json").read_text())["seed"] == 1
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ds"]  # no scratch folder left beside it
     # the dataset with one file of the user's added is no longer only a dataset: left alone
     (out / "my-notes.txt").write_text("mine\n")
-    line = refused(tmp_path, "offrl_jax.datasets", "generate", "hopper-random", "--transitions", "100", "--out", out,
+    line = refused(tmp_path, "offrl_jax.data", "generate", "hopper-random", "--transitions", "100", "--out", out,
                    "--overwrite")
     assert "my-notes.txt" in line, line
 

@@ -1,5 +1,5 @@
 """Float64 parity: our TD3+BC, EDAC, ReBRAC and IQL updates equal a PyTorch reference update
-(`benchmarks.torch_reference`, written the way CORL writes them, from Fujimoto & Gu 2021, An et al. 2021, Tarasov et
+(`tests/torch_reference.py`, written the way CORL writes them, from Fujimoto & Gu 2021, An et al. 2021, Tarasov et
 al. 2023 and Kostrikov et al. 2022) to rounding.  ReBRAC and IQL are built from their own per-env defaults (their
 LayerNorm and epsilon as they ship), with the target-policy noise off; each test also checks that every network
 moved, so agreement is not two sides standing still.
@@ -38,9 +38,9 @@ import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 from torch import nn  # noqa: E402
 
-from benchmarks import torch_reference as ref  # noqa: E402
 from offrl_jax import nets  # noqa: E402
 from offrl_jax.algos import make_algorithm, make_config  # noqa: E402
+from tests import torch_reference as ref  # noqa: E402
 
 pytestmark = pytest.mark.parity
 

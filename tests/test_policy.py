@@ -11,8 +11,8 @@ import pytest
 
 from offrl_jax.policy import load_exported, load_policy
 from offrl_jax.rollout import rollout
-from offrl_jax.runner import run_study
-from offrl_jax.study import Study, Variant
+from offrl_jax.run.runner import run_study
+from offrl_jax.run.study import Study, Variant
 from tests.entry import run_module
 
 from .conftest import synthetic_dataset
@@ -39,7 +39,7 @@ def last_score(run: Path, variant: str, seed: int) -> float:
 
 @pytest.mark.parametrize("variant", ["scratch", "edac"])
 def test_the_loaded_policy_scores_what_the_run_evaluated(run, variant):
-    from offrl_jax.envs import normalized_score
+    from offrl_jax.envs.registry import normalized_score
 
     policy = load_policy(run, variant, seed=1)
     assert (policy.env, policy.variant, policy.seed, policy.update) == ("hopper", variant, 1, 400)
@@ -74,7 +74,7 @@ def test_the_best_checkpoint_is_the_best_evaluation(run):
 
 
 def test_keep_n_keeps_the_newest_periodic_checkpoints(run):
-    from offrl_jax.envs import normalized_score
+    from offrl_jax.envs.registry import normalized_score
 
     kept = sorted(p.name for p in (run / "checkpoints").glob("*.*00.msgpack"))
     assert kept == ["edac.300.msgpack", "edac.400.msgpack", "scratch.300.msgpack", "scratch.400.msgpack"]

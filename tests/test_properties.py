@@ -11,9 +11,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 from offrl_jax.algos import make_config
-from offrl_jax.cli import number, positive_int
 from offrl_jax.data.dataset import DatasetError
 from offrl_jax.data.readers import load_dataset_path
+from offrl_jax.system.cli import number, positive_int
 
 FAST = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 ANY_FLOAT = st.floats(allow_nan=True, allow_infinity=True)

@@ -3,9 +3,9 @@ import json
 
 import numpy as np
 
-from offrl_jax.provenance import command_line, fingerprint, run_record
-from offrl_jax.runner import run_study
-from offrl_jax.study import Study, Variant
+from offrl_jax.run.provenance import command_line, fingerprint, run_record
+from offrl_jax.run.runner import run_study
+from offrl_jax.run.study import Study, Variant
 
 
 def test_config_json_holds_the_resolved_config_and_round_trips(tiny_dataset):

@@ -10,9 +10,9 @@ import h5py
 import numpy as np
 import pytest
 
+from offrl_jax.data.catalogue import door_human_path
 from offrl_jax.data.dataset import DatasetError
 from offrl_jax.data.readers import infer_env, load_dataset_path, read_d4rl_hdf5, read_door_npz, read_minari, validate
-from offrl_jax.datasets import door_human_path
 
 
 def d4rl_arrays(T=40, obs_dim=11, act_dim=3, seed=0):

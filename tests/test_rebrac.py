@@ -84,9 +84,9 @@ def test_the_critic_target_penalises_the_distance_to_the_next_dataset_action():
 def test_pretrained_rebrac_runs_through_the_runner(tmp_path, tiny_dataset):
     import json
 
-    from offrl_jax.results import read_curves
-    from offrl_jax.runner import run_study
-    from offrl_jax.study import Study, Variant
+    from offrl_jax.run.results import read_curves
+    from offrl_jax.run.runner import run_study
+    from offrl_jax.run.study import Study, Variant
 
     study = Study(name="t", dataset="synthetic", env="hopper", seeds=(0, 1), updates=400, eval_every=200,
                   eval_episodes=1, batch_size=32, reference="scratch",

@@ -1,5 +1,5 @@
 """A resume continues the run its files belong to, or refuses with one line and changes nothing
-(`offrl_jax.resume`)."""
+(`offrl_jax.run.resume`)."""
 from __future__ import annotations
 
 import dataclasses
@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 from flax import serialization
 
-from offrl_jax.resume import ResumeMismatch, shape_mismatch
-from offrl_jax.runner import run_study
-from offrl_jax.study import Study, Variant
+from offrl_jax.run.resume import ResumeMismatch, shape_mismatch
+from offrl_jax.run.runner import run_study
+from offrl_jax.run.study import Study, Variant
 
 from .conftest import synthetic_dataset
 
@@ -160,7 +160,7 @@ def test_an_edited_resolved_config_is_refused(half_run, tmp_path):
 
 
 def test_a_config_field_added_since_is_no_difference_at_its_default():
-    from offrl_jax.resume import identity_differences
+    from offrl_jax.run.resume import identity_differences
 
     saved = {"variants": [["v", "td3bc", []]], "resolved": [{"alpha": 2.5}], "seeds": [0], "batch_size": 256,
              "env": "hopper", "data": "abc"}
@@ -238,8 +238,8 @@ def test_a_run_stopped_after_its_first_evaluation_has_a_checkpoint_to_resume_fro
     """The first evaluation (here the hand-over at 100, off the 200-update checkpoint grid) writes a checkpoint
     along with its rows, so a stop right after it leaves a run that resumes instead of one refused for rows
     without a checkpoint."""
-    from offrl_jax import runner
-    from offrl_jax.resume import check_resume
+    from offrl_jax.run import runner
+    from offrl_jax.run.resume import check_resume
 
     study = tiny_study(updates=400, eval_every=100, checkpoint_every=400,
                        variants=(Variant.of("pretrained", "td3bc", pretrain_updates=100, hidden=(32, 32)),))
@@ -254,5 +254,5 @@ def test_a_run_stopped_after_its_first_evaluation_has_a_checkpoint_to_resume_fro
     with pytest.raises(KeyboardInterrupt):
         run_study(study, tmp_path / "run", ds, progress=False)
     assert (tmp_path / "run" / "checkpoints" / "pretrained.msgpack").is_file()
-    from offrl_jax.provenance import fingerprint
+    from offrl_jax.run.provenance import fingerprint
     check_resume(study, tmp_path / "run", ds, fingerprint(ds))  # raises if it would be refused

@@ -1,9 +1,9 @@
-"""The statistics of offrl_jax.stats against hand-computed cases: IQM, censored updates-to-threshold, the speed-up
+"""The statistics of offrl_jax.run.stats against hand-computed cases: IQM, censored updates-to-threshold, the speed-up
 and its bootstrap interval, the probability of improvement, the flat-trend test, performance profiles."""
 import numpy as np
 import pytest
 
-from offrl_jax import stats
+from offrl_jax.run import stats
 
 
 def test_iqm_trims_a_quarter_at_each_end():

@@ -4,7 +4,7 @@ import json
 import pytest
 
 from experiments import ablation, adroit_door, figure2, lambda_sweep, layernorm, mujoco_medium, qtransformer, replay
-from offrl_jax.cli import UsageError
+from offrl_jax.system.cli import UsageError
 
 
 def build(module, argv):
@@ -116,7 +116,7 @@ def test_figure2_num_critics_is_edac_only():
 
 
 def test_alpha_sweep_builds_one_variant_per_value_and_groups_them():
-    from offrl_jax.study import sweep_groups
+    from offrl_jax.run.study import sweep_groups
 
     (study,) = build(mujoco_medium, ["--alpha", "1", "2.5", "10"])
     assert labels(study) == [f"{p} alpha={a}" for p in ("pretrained", "scratch") for a in ("1", "2.5", "10")]
@@ -173,9 +173,9 @@ def test_a_failing_parallel_variant_stops_the_others_at_once(tmp_path, monkeypat
     """Group 0 runs until told to stop (or 60 s); group 1 fails at once: the run must not wait for group 0."""
     import time
 
-    from offrl_jax import runner
-    from offrl_jax.runner import Stopped, run_study
-    from offrl_jax.study import Study, Variant
+    from offrl_jax.run import runner
+    from offrl_jax.run.runner import Stopped, run_study
+    from offrl_jax.run.study import Study, Variant
 
     def fake_group(study, group, swept, ds, data_sha256, out_dir, resume, bar, recorder):
         if group[0].label == "slow":
@@ -219,7 +219,7 @@ def test_random_scores_report_the_installed_reward_too():
 
 
 def test_every_sweepable_field_sweeps_from_the_command_line():
-    from offrl_jax.study import sweep_groups
+    from offrl_jax.run.study import sweep_groups
 
     for flag, name in (("--tau", "tau"), ("--policy-noise", "policy_noise"), ("--noise-clip", "noise_clip")):
         (study,) = build(mujoco_medium, [flag, "0.1", "0.2", "--pretrain", "none"])
@@ -231,7 +231,7 @@ def test_every_sweepable_field_sweeps_from_the_command_line():
 
 @pytest.mark.parametrize("field, value", [("resolved", []), ("resolved", None), ("runs", {}), ("runs", "x")])
 def test_a_config_json_whose_records_have_the_wrong_shape_is_not_a_saved_study(field, value):
-    from offrl_jax.study import Study, Variant
+    from offrl_jax.run.study import Study, Variant
 
     study = Study(name="t", dataset="hopper-medium", env="hopper", variants=(Variant.of("a", "td3bc"),))
     raw = json.loads(study.to_json()) | {field: value}

@@ -2,8 +2,8 @@
 every seed's updates and seconds to each threshold, the speed-up and the verdict."""
 import pytest
 
-from offrl_jax.study import Study, Variant
-from offrl_jax.summary import summarize
+from offrl_jax.run.study import Study, Variant
+from offrl_jax.run.summary import summarize
 
 
 def rows_of(label, curve_per_seed, every=1000):
@@ -127,7 +127,7 @@ def test_ninety_percent_of_a_negative_asymptote_lies_below_it():
                   variants=(Variant.of("pre", "td3bc", pretrain_updates=1000),
                             Variant.of("scratch", "td3bc", pretrain="none")),
                   reference="scratch")
-    from offrl_jax.summary import fraction_of
+    from offrl_jax.run.summary import fraction_of
 
     assert fraction_of(-10.0, 0.9) == -11.0 and fraction_of(10.0, 0.9) == 9.0
     rows = rows_of("pre", [[-11.0, -10.5, -10.5]]) + rows_of("scratch", [[-20.0, -10.0, -10.0]])
@@ -138,7 +138,7 @@ def test_ninety_percent_of_a_negative_asymptote_lies_below_it():
 
 
 def test_the_table_shows_every_seed_and_marks_censored_seeds_and_lower_bounds():
-    from offrl_jax.summary import summary_table
+    from offrl_jax.run.summary import summary_table
 
     study = Study(name="t", dataset="hopper-medium", env="hopper", seeds=(0, 1), updates=3000, eval_every=1000,
                   variants=(Variant.of("pretrained", "td3bc", pretrain_updates=1000),
@@ -169,7 +169,7 @@ def test_a_seed_that_diverges_inside_the_final_window_has_no_final_score():
 def test_summary_json_writes_null_for_nan():
     import json
 
-    from offrl_jax.summary import summary_json
+    from offrl_jax.run.summary import summary_json
 
     text = summary_json([{"asymptote": float("nan"), "final_score_mean": 3.0, "overrides": {"x": float("inf")}}])
     assert json.loads(text) == [{"asymptote": None, "final_score_mean": 3.0, "overrides": {"x": None}}]
@@ -177,7 +177,7 @@ def test_summary_json_writes_null_for_nan():
 
 
 def _run_dir(path, study, rows):
-    from offrl_jax.results import write_curves
+    from offrl_jax.run.results import write_curves
 
     path.mkdir()
     (path / "config.json").write_text(study.to_json())
@@ -189,7 +189,7 @@ def test_merge_runs_resummarises_variants_trained_apart(tmp_path, capsys):
     import json
 
     from experiments import report
-    from offrl_jax.results import read_curves
+    from offrl_jax.run.results import read_curves
 
     common = dict(name="t", dataset="hopper-medium", env="hopper", seeds=(0, 1), updates=4000, eval_every=1000)
     pre = Study(variants=(Variant.of("pretrained", "td3bc", pretrain_updates=2000),), **common)
@@ -231,7 +231,7 @@ def test_merge_runs_resummarises_variants_trained_apart(tmp_path, capsys):
 
 
 def test_a_truncated_curves_csv_is_refused_not_read_short(tmp_path):
-    from offrl_jax.results import read_curves
+    from offrl_jax.run.results import read_curves
 
     path = tmp_path / "curves.csv"
     path.write_text("variant,seed,update,score,critic_loss\na,0,100,1.5,2.0\na,0,200,1.7,\nb,0,100,0.4")

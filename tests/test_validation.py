@@ -7,7 +7,7 @@ import pytest
 
 from offrl_jax.algos import ALGOS, make_config
 from offrl_jax.policy import load_policy
-from offrl_jax.study import Study, Variant
+from offrl_jax.run.study import Study, Variant
 
 
 @pytest.mark.parametrize("algo, overrides, message", [

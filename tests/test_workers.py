@@ -1,4 +1,4 @@
-"""Variants in worker processes (`offrl_jax.workers`): results, progress and errors reach the parent; a failure or a
+"""Variants in worker processes (`system.workers`): results, progress and errors reach the parent; a failure or a
 dead worker stops the run with one error; a one-core worker runs single-threaded XLA on its own core."""
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import time
 
 import pytest
 
-from offrl_jax.workers import SINGLE_THREAD_XLA, core_sets, run_in_processes
+from offrl_jax.system.workers import SINGLE_THREAD_XLA, core_sets, run_in_processes
 
 
 class Bar:

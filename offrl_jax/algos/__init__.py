@@ -30,7 +30,7 @@ from offrl_jax.algos.iql import IQL, IQLConfig
 from offrl_jax.algos.rebrac import ReBRAC, ReBRACConfig
 from offrl_jax.algos.sacn import SACN, SACNConfig
 from offrl_jax.algos.td3bc import TD3BC, TD3BCConfig
-from offrl_jax.envs import ENVS
+from offrl_jax.envs.registry import ENVS
 
 
 @dataclasses.dataclass(frozen=True)

@@ -5,8 +5,8 @@
     2. start the processes   this process's CPU cores, a multi-process run's others (`offrl_jax.app.launch`)
     3. claim the output      the run directory chosen (`offrl_jax.app.outputs`), checked writable and locked
     4. load the data         every dataset once, before anything is written; bad data fails here
-    5. check a resume        every checkpoint belongs to its study, data and settings (`offrl_jax.resume`)
-    6. run                   each study into its directory (`offrl_jax.runner.run_study`), its table printed
+    5. check a resume        every checkpoint belongs to its study, data and settings (`offrl_jax.run.resume`)
+    6. run                   each study into its directory (`offrl_jax.run.runner.run_study`), its table printed
     7. clean up              an --overwrite'd earlier run deleted, or given back if the new one has no checkpoint
                              yet; a claimed directory that got nothing removed; the lock released
 
@@ -25,18 +25,18 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from offrl_jax import datasets
 from offrl_jax.app.launch import check_backend, start_local_processes, start_processes, use_cpu_cores
 from offrl_jax.app.outputs import output_dir, saved_studies, studies_json
-from offrl_jax.checkpoint import atomic_write_text
-from offrl_jax.cli import UsageError, check_writable_dir, lock_run_dir, one_line_warnings, print_error
+from offrl_jax.data import catalogue
 from offrl_jax.data.dataset import DatasetError
-from offrl_jax.interrupts import exit_code
-from offrl_jax.provenance import fingerprint
-from offrl_jax.resume import check_resume, edited_resolved
-from offrl_jax.runner import Diverged, run_study
-from offrl_jax.study import Study, Variant
-from offrl_jax.summary import print_table
+from offrl_jax.run.provenance import fingerprint
+from offrl_jax.run.resume import check_resume, edited_resolved
+from offrl_jax.run.runner import Diverged, run_study
+from offrl_jax.run.study import Study, Variant
+from offrl_jax.run.summary import print_table
+from offrl_jax.system.checkpoint import atomic_write_text
+from offrl_jax.system.cli import UsageError, check_writable_dir, lock_run_dir, one_line_warnings, print_error
+from offrl_jax.system.interrupts import exit_code
 
 Build = Callable[[argparse.Namespace], "Study | list[Study]"]
 
@@ -95,7 +95,7 @@ def replay(saved: Study | list[Study], args, given: set[str], hparams: dict) -> 
 def load_data(study: Study, clip_actions: bool = False):
     """The study's dataset (`clip_actions`: also clip, for a resumed run saved before studies recorded it)."""
     clip = study.clip_actions or clip_actions or None
-    ds = datasets.load(study.dataset, max_transitions=study.max_transitions, clip_actions=clip, env=study.env)
+    ds = catalogue.load(study.dataset, max_transitions=study.max_transitions, clip_actions=clip, env=study.env)
     if ds.env is not None and ds.env != study.env:
         raise UsageError(f"{study.dataset}: dataset is for env '{ds.env}', not '{study.env}'")
     return ds

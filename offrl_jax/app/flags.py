@@ -29,9 +29,9 @@ from pathlib import Path
 from typing import Any
 
 from offrl_jax.algos import FAMILIES
-from offrl_jax.cli import int_at_least, integer, number, positive_int, seed_int
-from offrl_jax.loggers import LOGGERS
-from offrl_jax.study import MAX_MEMBERS
+from offrl_jax.run.loggers import LOGGERS
+from offrl_jax.run.study import MAX_MEMBERS
+from offrl_jax.system.cli import int_at_least, integer, number, positive_int, seed_int
 
 CONFIGS = tuple(family.config for family in FAMILIES.values())
 # fields a study sets through its own flags or its algorithm choice, never one-by-one
@@ -221,7 +221,7 @@ def run_args(parser: argparse.ArgumentParser, updates: int | None, eval_every: i
                         "every core")
     g.add_argument("--no-progress", action="store_true",
                    help="no progress bar: one plain line per evaluation instead (for batch logs)")
-    m = parser.add_argument_group("many processes or hosts (jax.distributed; offrl_jax/distributed.py)")
+    m = parser.add_argument_group("many processes or hosts (jax.distributed; offrl_jax/system/distributed.py)")
     m.add_argument("--processes", type=positive_int, default=1,
                    help="split the seeds of every variant over N processes of this machine, each on its share of "
                         "the cores (one run: process 0 writes it; default 1). One process already splits a "

@@ -14,8 +14,8 @@ import os
 import sys
 from pathlib import Path
 
-from offrl_jax.cli import UsageError
-from offrl_jax.workers import USER_XLA_FLAGS, cpu_flags, process_cores
+from offrl_jax.system.cli import UsageError
+from offrl_jax.system.workers import USER_XLA_FLAGS, cpu_flags, process_cores
 
 
 def use_cpu_cores() -> None:
@@ -64,8 +64,7 @@ def start_processes(args) -> bool:
         raise UsageError(f"--process-id {args.process_id} must be below --num-processes {args.num_processes}")
     if args.out is None and args.resume is None:
         raise UsageError("a multi-process run needs --out (or --resume): every process must name the same directory")
-    from offrl_jax import distributed
-
+    from offrl_jax.system import distributed
     if not args.distributed:  # a missing partner would otherwise look like a silent hang
         print(f"process {args.process_id} of {args.num_processes}: joining the run at {args.coordinator} (waiting up "
               "to 5 minutes for the others)", file=sys.stderr, flush=True)
@@ -92,10 +91,10 @@ def _child_argv(argv, args, out: Path) -> list[str]:
 
 def start_local_processes(args, argv, prog: str, out: Path):
     """With --processes N > 1: this process becomes process 0 of a run over N processes of this machine and starts
-    the others (`offrl_jax.distributed.LocalProcesses`, to be closed at the end); otherwise None."""
+    the others (`offrl_jax.system.distributed.LocalProcesses`, to be closed at the end); otherwise None."""
     if args.processes <= 1:
         return None
-    from offrl_jax.distributed import LocalProcesses
+    from offrl_jax.system.distributed import LocalProcesses
 
     local = LocalProcesses(args.processes, prog, _child_argv(argv, args, out))
     local.start()

@@ -14,8 +14,8 @@ import sys
 import time
 from pathlib import Path
 
-from offrl_jax.cli import UsageError
-from offrl_jax.study import Study, check_file_name
+from offrl_jax.run.study import Study, check_file_name
+from offrl_jax.system.cli import UsageError
 
 
 def output_dir(args, study_name: str) -> tuple[Path, bool]:
@@ -54,7 +54,7 @@ def output_dir(args, study_name: str) -> tuple[Path, bool]:
     return args.out, False
 
 
-# what a run writes in its directory (offrl_jax/runner.py, offrl_jax/loggers.py, offrl_jax/checkpoint.py)
+# what a run writes in its directory (offrl_jax/run/runner.py, offrl_jax/run/loggers.py, offrl_jax/system/checkpoint.py)
 RUN_FILES = frozenset({"config.json", "curves.csv", "curves.png", "summary.json", "wandb-run-id"})
 RUN_FOLDERS = {"checkpoints": lambda name: name.endswith(".msgpack"),  # <variant>[.best|.<update>].msgpack
                "tensorboard": lambda name: name.startswith("events.out.tfevents."),

@@ -14,9 +14,9 @@ from pathlib import Path
 
 from offrl_jax.algos import ALGOS, PRESETS, SACNConfig, preset_values
 from offrl_jax.app.flags import FLAG_FIELDS, add_config_flags, config_values, run_args, sweepable_fields
-from offrl_jax.cli import OneLineParser, UsageError, positive_int
 from offrl_jax.data.readers import FILE_SUFFIXES
-from offrl_jax.study import Study, Variant
+from offrl_jax.run.study import Study, Variant
+from offrl_jax.system.cli import OneLineParser, UsageError, positive_int
 
 ENVS = ("hopper", "halfcheetah", "walker2d")
 LEVELS = ("medium", "medium-replay", "full-replay", "medium-expert", "expert", "random")

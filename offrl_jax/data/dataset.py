@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from offrl_jax.cache import cache_dir
+from offrl_jax.system.cache import cache_dir
 
 ARRAY_FIELDS = ("observations", "actions", "rewards", "next_observations", "terminals", "timeouts")
 NORMALIZE_EPS = 1e-3
@@ -31,7 +31,7 @@ class Dataset:
     next_observations: np.ndarray  # (T, obs_dim) float32
     terminals: np.ndarray  # (T,) float32 in {0, 1}
     timeouts: np.ndarray  # (T,) float32 in {0, 1}: episode ends that are not terminals
-    env: str | None = None  # short env name from `offrl_jax.envs.ENVS` (e.g. "hopper"), if known
+    env: str | None = None  # short env name from `offrl_jax.envs.registry.ENVS` (e.g. "hopper"), if known
     name: str = "dataset"  # e.g. "hopper-medium" or the file name
     source: str = ""  # where it came from (path, "generated", ...)
 

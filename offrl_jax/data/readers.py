@@ -21,7 +21,7 @@ import h5py
 import numpy as np
 
 from offrl_jax.data.dataset import Dataset, DatasetError
-from offrl_jax.envs import ENVS
+from offrl_jax.envs.registry import ENVS
 
 FILE_SUFFIXES = (".hdf5", ".h5", ".npz")  # a dataset file: D4RL's HDF5, or an .npz of arrays
 

@@ -33,8 +33,6 @@ from typing import Any
 
 import numpy as np
 
-from offrl_jax.cache import cache_dir
-from offrl_jax.checkpoint import atomic_write_text
 from offrl_jax.data.dataset import Dataset, dataset_dir
 from offrl_jax.data.generate.collect import (
     MEDIUM_TARGET_SCORE,
@@ -44,7 +42,9 @@ from offrl_jax.data.generate.collect import (
     shipped_policies,
     summarize,
 )
-from offrl_jax.envs import get_env_spec
+from offrl_jax.envs.registry import get_env_spec
+from offrl_jax.system.cache import cache_dir
+from offrl_jax.system.checkpoint import atomic_write_text
 
 GEN_ENVS = ("hopper", "halfcheetah", "walker2d")
 LEVELS = ("random", "medium", "expert", "medium-expert", "medium-replay", "full-replay")
@@ -244,7 +244,7 @@ def generate(name: str, transitions: int | None = None, out_dir: str | Path | No
     out_dir: the dataset directory (default `dataset_dir(name)`: `cache_dir()/"datasets"/<name>-v0`); an existing
         one raises unless overwrite, which replaces only a dataset directory written here (`check_replaceable`).
     seed: env / action-noise seed of the rollouts.  sac_run: SAC run directory for the replay levels.
-    demos: the human demonstrations door-cloned is made from (`offrl_jax.datasets.load("door-human")`).
+    demos: the human demonstrations door-cloned is made from (`offrl_jax.data.catalogue.load("door-human")`).
     shown_as: what the closing `[generate]` line names as the destination (default: the directory written).
     """
     target = Path(out_dir) if out_dir is not None else default_dir(name)

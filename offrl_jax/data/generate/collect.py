@@ -22,7 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from offrl_jax.data.dataset import Dataset
-from offrl_jax.envs import get_env_spec, make_env, normalized_score, warn_once_per_message
+from offrl_jax.envs.registry import get_env_spec, make_env, normalized_score, warn_once_per_message
 from offrl_jax.nets import TanhGaussianActor, sample_tanh_gaussian
 
 ACTOR_HIDDEN = (256, 256)

@@ -1,11 +1,11 @@
 """door-cloned: D4RL's recipe for Adroit "cloned" datasets, on gymnasium-robotics' AdroitHandDoor-v1.
 
     from offrl_jax.data.generate.door_cloned import generate_door_cloned
-    demos = offrl_jax.datasets.load("door-human")
+    demos = offrl_jax.data.catalogue.load("door-human")
     path = generate_door_cloned(demos)                             # 1M rows -> cache_dir()/"datasets"/"door-cloned"
     path = generate_door_cloned(demos, transitions=4000, out_dir="/tmp/dc")
 
-The demonstrations come in as an argument (the catalogue, `offrl_jax.datasets`, loads them), so this generator does
+The demonstrations come in as an argument (the catalogue, `data/catalogue.py`, loads them), so this generator does
 not call back into the catalogue.
 
 D4RL (scripts/generation/hand_dapg_policies.py + hand_dapg_combined.py): an MLP policy behaviour-cloned on the 25
@@ -18,7 +18,7 @@ Here:
     `Driver` on the demonstrations for `bc_updates` updates; its deterministic tanh actor on normalised
     observations is the mean, and rollouts add N(0, noise_std^2) noise per action dimension, then clip to [-1, 1].
   * Rollouts use `make_env("door")` (the paper's 300-step limit; D4RL used the v0 env's 200) with the *original*
-    D4RL reward (`offrl_jax.adroit.OriginalAdroitReward`), so both halves share the demonstrations' reward function.
+    D4RL reward (`envs.adroit.OriginalAdroitReward`), so both halves share the demonstrations' reward function.
   * Rows: whole rollout episodes until >= transitions // 2 rows (the last one cut if it would pass `transitions`),
     then the demonstrations repeated in order until exactly `transitions` rows; a demonstration cut short by the end
     of the dataset ends in a time-out (a cut, not a terminal).  No terminals anywhere.
@@ -58,7 +58,7 @@ def train_bc(demos: Dataset, updates: int = DEFAULT_BC_UPDATES, seed: int = 0, b
 
     from offrl_jax.algos import make_algorithm, make_config
     from offrl_jax.driver import Driver, device_data
-    from offrl_jax.evaluate import make_policy
+    from offrl_jax.envs.evaluate import make_policy
 
     config = make_config("bc", "door")
     algo = make_algorithm(config, demos.obs_dim, demos.act_dim, len(demos))
@@ -104,9 +104,9 @@ def rollout(act: Callable[[np.ndarray], np.ndarray], min_transitions: int, max_t
 
     Returns (arrays of the Dataset fields, float32, episodes in the order they finish; stats).
     """
-    from offrl_jax.adroit import with_original_reward
     from offrl_jax.data.generate.collect import rollout_episodes
-    from offrl_jax.envs import get_env_spec, make_env
+    from offrl_jax.envs.adroit import with_original_reward
+    from offrl_jax.envs.registry import get_env_spec, make_env
 
     horizon = get_env_spec("door").max_episode_steps
     max_transitions = max_transitions or min_transitions
@@ -187,7 +187,7 @@ def build_door_cloned(demos: Dataset, transitions: int = DEFAULT_TRANSITIONS, se
         "demos": {"path": demos.source, "episodes": int(demos.episode_ends.sum()),
                   "transitions": len(demos), "rows_used": int(n_demo),
                   "repeats": round(n_demo / len(demos), 2)},
-        "reward": "original D4RL reward (offrl_jax.adroit.OriginalAdroitReward), as the demonstrations' rewards",
+        "reward": "original D4RL reward (offrl_jax.envs.adroit.OriginalAdroitReward), as the demonstrations' rewards",
     }
     source["_actor_variables"] = bc_info["actor_variables"]
     return ds, source
@@ -204,7 +204,7 @@ def generate_door_cloned(demos: Dataset, transitions: int | None = None, out_dir
 
     from offrl_jax.data.generate import write_minari
     from offrl_jax.data.generate.collect import summarize
-    from offrl_jax.envs import get_env_spec
+    from offrl_jax.envs.registry import get_env_spec
 
     cap, transitions = transitions, int(transitions or DEFAULT_TRANSITIONS)
     out = Path(out_dir) if out_dir is not None else dataset_dir(NAME)

@@ -39,8 +39,12 @@ import numpy as np
 import optax
 
 from offrl_jax import losses
-from offrl_jax.checkpoint import atomic_write_bytes, atomic_write_text
-from offrl_jax.cli import (
+from offrl_jax.data.generate.collect import ACTOR_HIDDEN, actor_module, evaluate, make_gen_env
+from offrl_jax.data.generate.replay import ReplayBuffer, chunk_range, load_replay
+from offrl_jax.envs.registry import get_env_spec, normalized_score
+from offrl_jax.nets import CriticEnsemble, sample_tanh_gaussian
+from offrl_jax.system.checkpoint import atomic_write_bytes, atomic_write_text
+from offrl_jax.system.cli import (
     OneLineParser,
     check_writable_dir,
     int_at_least,
@@ -50,10 +54,6 @@ from offrl_jax.cli import (
     print_error,
     seed_int,
 )
-from offrl_jax.data.generate.collect import ACTOR_HIDDEN, actor_module, evaluate, make_gen_env
-from offrl_jax.data.generate.replay import ReplayBuffer, chunk_range, load_replay
-from offrl_jax.envs import get_env_spec, normalized_score
-from offrl_jax.nets import CriticEnsemble, sample_tanh_gaussian
 
 
 @dataclasses.dataclass(frozen=True)
@@ -455,6 +455,6 @@ def discard_unstarted(out: Path) -> None:
 
 
 if __name__ == "__main__":
-    from offrl_jax.cli import run_main
+    from offrl_jax.system.cli import run_main
 
     run_main(main)

@@ -18,10 +18,10 @@ from typing import Any
 
 import numpy as np
 
-from offrl_jax.checkpoint import atomic_write_bytes, atomic_write_text
-from offrl_jax.cli import OneLineParser, check_writable_dir, positive_int
 from offrl_jax.data.generate.collect import MEDIUM_TARGET_SCORE, POLICY_DIR, POLICY_INDEX, evaluate, load_policy
-from offrl_jax.envs import get_env_spec, normalized_score
+from offrl_jax.envs.registry import get_env_spec, normalized_score
+from offrl_jax.system.checkpoint import atomic_write_bytes, atomic_write_text
+from offrl_jax.system.cli import OneLineParser, check_writable_dir, positive_int
 
 
 def read_run(run_dir: str | Path) -> dict[str, Any]:
@@ -213,6 +213,6 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    from offrl_jax.cli import run_main
+    from offrl_jax.system.cli import run_main
 
     run_main(main)

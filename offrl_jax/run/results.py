@@ -1,5 +1,5 @@
 """A run's curves: curves.csv IO and checks, the (seeds x evaluations) score matrix of a variant, and curves.png.
-What is computed from them is `offrl_jax.summary`.
+What is computed from them is `offrl_jax.run.summary`.
 """
 from __future__ import annotations
 
@@ -11,8 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from offrl_jax.checkpoint import atomic_write_bytes, atomic_write_text
-from offrl_jax.study import Study
+from offrl_jax.run.study import Study
+from offrl_jax.system.checkpoint import atomic_write_bytes, atomic_write_text
 
 CURVE_COLUMNS = ("variant", "algo", "seed", "phase", "update", "seconds", "score")  # then each metric logged
 
@@ -113,8 +113,7 @@ def all_nan_expected():
 def iqm_band(scores: np.ndarray, resamples: int = 2000) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(IQM, low, high) over seeds at every evaluation of `scores` (S, E): the 95 % bootstrap interval of the IQM
     (the IQM alone where a single seed gives no interval)."""
-    from offrl_jax import stats
-
+    from offrl_jax.run import stats
     found = [stats.interval([scores[:, j]], stats.iqm, resamples=resamples) for j in range(scores.shape[1])]
     middle = np.array([e.value for e in found])
     return (middle, np.array([e.value if e.low is None else e.low for e in found]),

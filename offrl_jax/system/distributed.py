@@ -41,7 +41,7 @@ def initialize(coordinator: str | None = None, num_processes: int | None = None,
 class LocalProcesses:
     """One run over `n` processes of this machine: this one is process 0 and starts processes 1..n-1 as copies of
     the command (`argv`, with the coordinator flags added), each pinned to its share of the cores with
-    one single-threaded XLA device per core, as `offrl_jax.workers` does for variants.  Call `start`
+    one single-threaded XLA device per core, as `offrl_jax.system.workers` does for variants.  Call `start`
     before JAX's backend starts; `close` waits for the others (or stops them after a failure)."""
 
     def __init__(self, n: int, module: str, argv: list[str]):
@@ -56,7 +56,7 @@ class LocalProcesses:
         import tempfile
         import threading
 
-        from offrl_jax.workers import core_sets, cpu_flags
+        from offrl_jax.system.workers import core_sets, cpu_flags
 
         with socket.socket() as s:
             s.bind(("localhost", 0))

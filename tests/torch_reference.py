@@ -1,42 +1,24 @@
-"""The same TD3+BC and EDAC updates written the way PyTorch users write them (after CORL's td3_bc.py and edac.py),
-for a side-by-side updates/s ratio against the JAX driver on the same machine.  PyTorch is an optional extra
-(`pip install -e .[torch]`, CPU build); nothing else in the package imports this module.
+"""Reference updates written the way PyTorch users write them, after CORL's td3_bc.py, edac.py, rebrac.py and
+iql.py, from the published equations: the other side of tests/test_parity_torch.py, which checks in float64 that
+our JAX updates equal these.  `benchmarks.pytorch` also times the TD3+BC and EDAC ones against the JAX driver.
 
-    python -m benchmarks.torch_reference [--algo td3bc edac] [--json]     PyTorch alone
-    python -m benchmarks.torch_reference --compare                        JAX and PyTorch interleaved, with ratios
-
-Same shapes as benchmarks.throughput: hopper (obs 11, act 3), 100k random transitions, batch 256, default sizes
+Defaults are the benchmark's shapes: hopper (obs 11, act 3), 100k random transitions, batch 256, default sizes
 (TD3+BC: 2x256 + LayerNorm, twin critics, policy delay 2; EDAC: 3x256 + LayerNorm, N = 10 vectorised critics,
-eta = 1), one seed.  Like CORL, the PyTorch TD3+BC actor loss evaluates critic 1 only, and the PyTorch EDAC
-diversity loss runs its own second forward pass of the ensemble (CORL's `_critic_diversity_loss`).
+eta = 1), one seed.  Like CORL, the TD3+BC actor loss evaluates critic 1 only, and the EDAC diversity loss runs its
+own second forward pass of the ensemble (CORL's `_critic_diversity_loss`).  The classes take keyword arguments
+beyond those (sizes, LayerNorm form, what a TD target treats as done, the tanh log-det form, a log-alpha bound,
+injected sampling noise, the pre-training updates) so the parity tests can match every switch of ours.
 
-The classes take keyword arguments beyond the benchmark's (sizes, LayerNorm form, what a TD target treats as done,
-the tanh log-det form, a log-alpha bound, injected sampling noise, the pre-training updates), all defaulting to the
-benchmark's settings, so that tests/test_parity_torch.py can check in float64 that the JAX updates equal these.
-`ReBRAC` and `IQL` (CORL's `rebrac.py` and `iql.py` updates) exist for those tests only.
+Needs torch (`pip install -e .[torch]`); nothing in the package imports this module.
 """
 from __future__ import annotations
 
 import copy
-import json
 import math
-import os
-import sys
-import time
 
-import numpy as np
-
-from offrl_jax.cli import OneLineParser, positive_int, print_error
-
-try:
-    import torch
-    import torch.nn.functional as F
-    from torch import nn
-except ModuleNotFoundError:
-    if __name__ != "__main__":  # an import (the parity tests skip on it)
-        raise
-    print_error("benchmarks.torch_reference needs PyTorch: pip install torch")
-    sys.exit(2)
+import torch
+import torch.nn.functional as F
+from torch import nn
 
 OBS_DIM, ACT_DIM, BATCH, ROWS = 11, 3, 256, 100_000
 
@@ -447,89 +429,3 @@ class IQL:
         actor_loss.backward()
         self.actor_opt.step()
         self.schedule.step()
-
-
-# ----------------------------------------------------------------------------------------------------------- timing
-
-
-def make(algo: str):
-    agent = TD3BC() if algo == "td3bc" else EDAC(num_critics=10)
-    return agent.train if algo == "td3bc" else agent.update
-
-
-def time_torch(step, replay: Replay, updates: int) -> float:
-    """Seconds per update over `updates` updates (sampling included, as in the JAX scan)."""
-    tic = time.perf_counter()
-    for _ in range(updates):
-        step(replay.sample())
-    return (time.perf_counter() - tic) / updates
-
-
-def torch_updates(algo: str, target_s: float = 1.0) -> int:
-    return max(2, int(target_s * {"td3bc": 100, "edac": 3}[algo]) // 2 * 2)
-
-
-def run_torch(algos: list[str], reps: int, as_json: bool) -> None:
-    replay = Replay()
-    for algo in algos:
-        step = make(algo)
-        n = torch_updates(algo)
-        time_torch(step, replay, n)  # warm-up
-        t = float(np.median([time_torch(step, replay, n) for _ in range(reps)]))
-        r = {"algo": algo, "phase": "offline_rl", "impl": "torch", "seeds": 1, "updates_per_s": round(1 / t, 2),
-             "torch_threads": torch.get_num_threads(), "torch": torch.__version__,
-             "load1": round(os.getloadavg()[0], 2)}
-        print(json.dumps(r) if as_json else f"{algo:<6} torch {r['updates_per_s']:8.2f} updates/s "
-              f"({r['torch_threads']} threads, load {r['load1']})", flush=True)
-
-
-def compare(algos: list[str], rounds: int) -> None:
-    """JAX (driver chunk function, S = 1) and PyTorch timed alternately, so both see the same background load."""
-    from benchmarks.throughput import CASES, chain_rate, init_states, synthetic_data, time_case
-
-    data = synthetic_data(ROWS)
-    replay = Replay()
-    peak = chain_rate()
-    for algo in algos:
-        case = next(c for c in CASES if c.algo == algo and c.phase == "offline_rl"
-                    and c.config.num_critics == (2 if algo == "td3bc" else 10))
-        states = init_states(case, 1, ROWS)
-        step = make(algo)
-        n = torch_updates(algo)
-        time_torch(step, replay, n)
-        jax_rates, torch_rates = [], []
-        for _ in range(rounds):
-            r = time_case(case, 1, data, states, peak, 0.25 * peak, 1.0, 1, 1e9)
-            jax_rates.append(r["updates_per_s"])
-            torch_rates.append(1 / time_torch(step, replay, n))
-        j, t = float(np.median(jax_rates)), float(np.median(torch_rates))
-        print(json.dumps({"algo": algo, "phase": "offline_rl", "seeds": 1, "jax_updates_per_s": round(j, 2),
-                          "torch_updates_per_s": round(t, 2), "ratio": round(j / t, 2), "rounds": rounds,
-                          "jax_rates": jax_rates, "torch_rates": [round(x, 2) for x in torch_rates],
-                          "torch_threads": torch.get_num_threads(), "load1": round(os.getloadavg()[0], 2)}),
-              flush=True)
-
-
-def main(argv: list[str] | None = None) -> None:
-    p = OneLineParser(prog="benchmarks.torch_reference", description=__doc__.split("\n\n")[0])
-    p.add_argument("--algo", nargs="+", default=["td3bc", "edac"], choices=["td3bc", "edac"])
-    p.add_argument("--json", action="store_true")
-    p.add_argument("--reps", type=positive_int, default=3,
-                   help="timed rounds, median reported (default %(default)s)")
-    p.add_argument("--compare", action="store_true", help="interleave JAX and PyTorch timings; print the ratio")
-    p.add_argument("--threads", type=positive_int, help="torch.set_num_threads (default: PyTorch's choice)")
-    args = p.parse_args(argv)
-    if args.threads is not None:
-        torch.set_num_threads(args.threads)
-    torch.manual_seed(0)
-    print(f"# torch {torch.__version__}, {torch.get_num_threads()} threads, load {os.getloadavg()}", file=sys.stderr)
-    if args.compare:
-        compare(args.algo, args.reps)
-    else:
-        run_torch(args.algo, args.reps, args.json)
-
-
-if __name__ == "__main__":
-    from offrl_jax.cli import run_main
-
-    run_main(main)

@@ -1,7 +1,7 @@
 """Figures across runs: one panel per study, laid out as the paper's (rows: environments, columns: algorithms).
 
 Each panel draws every variant's IQM score over seeds against updates with its 95 % bootstrap interval
-(`offrl_jax.results.iqm_band`), a dotted line
+(`offrl_jax.run.results.iqm_band`), a dotted line
 where pre-training ended, and a dashed line at the behaviour data's score (the mean D4RL-normalised return of the
 dataset's episodes) when that dataset is in the cache.  `overlay=True` draws every study in one panel instead.
 Updates are ticked as 20k / 1M; the figure is written as PNG and PDF.
@@ -13,8 +13,8 @@ import io
 import json
 from pathlib import Path
 
-from offrl_jax.checkpoint import atomic_write_bytes
-from offrl_jax.results import all_nan_expected, iqm_band, read_curves, score_matrix
+from offrl_jax.run.results import all_nan_expected, iqm_band, read_curves, score_matrix
+from offrl_jax.system.checkpoint import atomic_write_bytes
 
 ALGO_NAMES = {"td3bc": "TD3+BC", "edac": "EDAC", "td3bc_cql": "TD3+BC+CQL", "edac_bc": "EDAC+BC", "bc": "BC",
               "cql": "CQL", "sacn": "SAC-N", "iql": "IQL", "rebrac": "ReBRAC"}
@@ -23,13 +23,13 @@ ALGO_NAMES = {"td3bc": "TD3+BC", "edac": "EDAC", "td3bc_cql": "TD3+BC+CQL", "eda
 @functools.cache
 def behaviour_score(dataset: str) -> float | None:
     """The dataset's behaviour score, if the dataset is cached (None otherwise: nothing is generated here)."""
-    from offrl_jax import datasets
-    from offrl_jax.summary import behaviour_score as of_data
+    from offrl_jax.data import catalogue
+    from offrl_jax.run.summary import behaviour_score as of_data
 
     try:
-        if not datasets.is_cached(dataset):
+        if not catalogue.is_cached(dataset):
             return None
-        ds = datasets.load(dataset)
+        ds = catalogue.load(dataset)
     except Exception:  # noqa: BLE001 -- a reference line is optional; a dataset we cannot read simply has none
         return None
     return of_data(ds)

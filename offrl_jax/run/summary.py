@@ -1,6 +1,6 @@
 """A study's summary (`summary.json`, one object per variant) and its printed tables, from curves.csv's rows.
 
-Every measure is per seed first (`offrl_jax.stats`), then aggregated with a stratified-bootstrap 95 % interval:
+Every measure is per seed first (`offrl_jax.run.stats`), then aggregated with a stratified-bootstrap 95 % interval:
 - the final score (per seed the mean of the last 10 % of evaluations, or of those inside `final_window`), the last
   evaluation's score (never the best), and the mean score over the run (the area under the curve), each as IQM;
 - per threshold, each seed's updates and seconds (pre-training included) to first reach it, a seed that never
@@ -20,9 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from offrl_jax import stats
-from offrl_jax.checkpoint import atomic_write_text
-from offrl_jax.results import (
+from offrl_jax.run import stats
+from offrl_jax.run.results import (
     all_nan_expected,
     check_curve_seeds,
     plot_curves,
@@ -32,7 +31,8 @@ from offrl_jax.results import (
     short_curves,
     write_curves,
 )
-from offrl_jax.study import Study, reference_label
+from offrl_jax.run.study import Study, reference_label
+from offrl_jax.system.checkpoint import atomic_write_text
 
 FRACTIONS = (0.8, 0.9, 0.95)
 
@@ -55,7 +55,7 @@ def final_scores(study: Study, updates: np.ndarray, scores: np.ndarray) -> np.nd
 def behaviour_score(dataset) -> float | None:
     """The dataset's behaviour score: its episodes' mean D4RL-normalised return (None where it has no episode or
     no normalisation)."""
-    from offrl_jax.envs import normalized_score
+    from offrl_jax.envs.registry import normalized_score
 
     try:
         returns = dataset.episode_returns()

@@ -38,7 +38,7 @@ def command_line(argv: list[str] | None = None) -> str:
 
 def git_state(where: Path | None = None) -> dict[str, Any] | None:
     """{"commit", "dirty"} of the checkout holding this package (None if it is not one, or git is missing)."""
-    where = where or Path(__file__).resolve().parent.parent
+    where = where or Path(__file__).resolve().parents[2]
     try:
         commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=where, capture_output=True, text=True, timeout=10)
         if commit.returncode != 0:

@@ -1,9 +1,9 @@
-"""Datasets by name or path, and a small CLI.
+"""The dataset catalogue: datasets by name or path, and its command (`offrl_jax/data/__main__.py`).
 
-    python -m offrl_jax.datasets list                      # known names, and which are cached
-    python -m offrl_jax.datasets info door-human           # one JSON object: transitions, episodes, dims, scores
-    python -m offrl_jax.datasets info path/to/file.hdf5    # any D4RL HDF5, Minari directory/id or Adroit .npz
-    python -m offrl_jax.datasets generate hopper-medium --transitions 100000
+    python -m offrl_jax.data list                      # known names, and which are cached
+    python -m offrl_jax.data info door-human           # one JSON object: transitions, episodes, dims, scores
+    python -m offrl_jax.data info path/to/file.hdf5    # any D4RL HDF5, Minari directory/id or Adroit .npz
+    python -m offrl_jax.data generate hopper-medium --transitions 100000
 
 Generated names ("hopper-medium", ...) live as Minari-format directories in `cache_dir()/"datasets"/<name>` and are
 generated on first use; "door-human" is the 25 human demonstrations shipped with the package (DAPG, Apache-2.0;
@@ -21,10 +21,17 @@ import tempfile
 import warnings
 from pathlib import Path
 
-from offrl_jax.cli import OneLineParser, check_writable_dir, one_line_warnings, positive_int, print_error, seed_int
 from offrl_jax.data.dataset import Dataset, DatasetError, dataset_dir
 from offrl_jax.data.readers import FILE_SUFFIXES, load_dataset_path, minari_root, read_door_npz, read_minari
-from offrl_jax.envs import get_env_spec, normalized_score
+from offrl_jax.envs.registry import get_env_spec, normalized_score
+from offrl_jax.system.cli import (
+    OneLineParser,
+    check_writable_dir,
+    one_line_warnings,
+    positive_int,
+    print_error,
+    seed_int,
+)
 
 _LOCOMOTION_KINDS = {
     "random": "uniformly random actions",
@@ -48,12 +55,12 @@ def shared_dir() -> Path:
     or from the working directory when the package is installed elsewhere)."""
     if os.environ.get("OFFRL_JAX_SHARED"):
         return Path(os.environ["OFFRL_JAX_SHARED"])
-    beside_repo = Path(__file__).resolve().parents[1].parent / "shared"
+    beside_repo = Path(__file__).resolve().parents[3] / "shared"
     beside_cwd = Path.cwd().resolve().parent / "shared"
     return beside_repo if beside_repo.is_dir() or not beside_cwd.is_dir() else beside_cwd
 
 
-PACKAGED = Path(__file__).resolve().parent / "data" / "adroit" / "door-human-demos.npz"
+PACKAGED = Path(__file__).resolve().parent / "adroit" / "door-human-demos.npz"
 
 
 def door_human_path() -> Path:
@@ -111,11 +118,11 @@ def _load_generated(name: str, max_transitions, clip_actions, generate_if_missin
     kw = {} if clip_actions is None else {"clip_actions": clip_actions}
     if not is_cached(name):
         if not generate_if_missing:
-            raise DatasetError(f"{path}: '{name}' is not generated yet; run: python -m offrl_jax.datasets generate "
+            raise DatasetError(f"{path}: '{name}' is not generated yet; run: python -m offrl_jax.data generate "
                                f"{name}")
         if max_transitions is not None:
             print(f"{name} is not cached: generating only the {max_transitions:,} transitions this run uses, not "
-                  f"cached (python -m offrl_jax.datasets generate {name} caches the full dataset)", file=sys.stderr)
+                  f"cached (python -m offrl_jax.data generate {name} caches the full dataset)", file=sys.stderr)
             with tempfile.TemporaryDirectory(prefix=f"offrl-{name}-") as tmp:
                 made = generate(name, transitions=max_transitions, out_dir=Path(tmp) / name,
                                 shown_as="memory, for this run only (not cached)")
@@ -182,7 +189,7 @@ def summary(ds: Dataset) -> dict:
 
 # ------------------------------------------------------------------------------------------------------------ CLI
 def _parser() -> argparse.ArgumentParser:
-    parser = OneLineParser(prog="python -m offrl_jax.datasets",
+    parser = OneLineParser(prog="python -m offrl_jax.data",
                            description="Offline RL datasets: list, inspect, generate.")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
     sub.add_parser("list", help="known dataset names and which are cached")
@@ -237,8 +244,3 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     return 0
 
-
-if __name__ == "__main__":
-    from offrl_jax.cli import run_main
-
-    run_main(main)

@@ -27,8 +27,8 @@ from flax import serialization
 
 from offrl_jax.algos import family_of, make_algorithm
 from offrl_jax.driver import INIT, seed_keys
-from offrl_jax.results import read_curves
-from offrl_jax.study import Study, Variant
+from offrl_jax.run.results import read_curves
+from offrl_jax.run.study import Study, Variant
 
 
 class ResumeMismatch(ValueError):

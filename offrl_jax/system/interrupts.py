@@ -2,7 +2,7 @@
 
 `quiet_start` (called by the `__init__` of each package that holds commands, so this module imports nothing heavy)
 covers the imports before a command's `main`: a Ctrl-C there ends the process at once, and an exception there (a JAX
-environment variable JAX cannot read) is one line. `during_command` is the handler from `offrl_jax.cli.run_main` on:
+environment variable JAX cannot read) is one line. `during_command` is the handler from `cli.run_main` on:
 Ctrl-C raises KeyboardInterrupt, which the command handles (a training run stops at the end of its current slice),
 except where Python would lose it or a C extension could crash on it: inside an import (JAX imported lazily: a half-
 initialised extension aborts the process or leaves an ImportError) or inside a callback whose exception Python
@@ -15,7 +15,7 @@ import os
 import signal
 import sys
 
-from offrl_jax.cache import keep_compiled_programs
+from offrl_jax.system.cache import keep_compiled_programs
 
 RETRY_S = 0.05
 
@@ -29,7 +29,7 @@ def quiet_start() -> None:
     """When Python runs one of the package's modules as a command (`python -m ...`: sys.argv[0] is "-m" while the
     package imports), a Ctrl-C until `run_main` ends the process at once, with one line and exit 130.  An import
     for any other purpose, or a process that ignores Ctrl-C, is left as it is.  A command also keeps JAX's compiled
-    programs (`offrl_jax.cache.keep_compiled_programs`)."""
+    programs (`offrl_jax.system.cache.keep_compiled_programs`)."""
     if sys.argv[:1] != ["-m"]:
         return
     keep_compiled_programs()

@@ -5,7 +5,7 @@ divergence.
 Output directory:
     config.json      the study (enough to resume or replay it), every variant's resolved config ("resolved": every
                      field after per-env defaults and presets), and one record per start or resume ("runs": command,
-                     git commit, versions, backend, dataset fingerprint; `offrl_jax.provenance`)
+                     git commit, versions, backend, dataset fingerprint; `offrl_jax.run.provenance`)
     curves.csv       variant, seed, phase, update, seconds, score, every logged metric; `seconds` is the variant's
                      training wall-clock so far: its jitted chunks including their XLA compilation, excluding the
                      evaluations (so a run stopped with SIGSTOP, or sharing its core, shows longer seconds)
@@ -32,19 +32,19 @@ import jax
 import numpy as np
 from tqdm.auto import tqdm
 
-from offrl_jax import distributed
 from offrl_jax.algos import make_algorithm
-from offrl_jax.checkpoint import atomic_write_text, load_checkpoint, save_checkpoint
 from offrl_jax.data.dataset import Dataset
 from offrl_jax.driver import Driver, device_data
-from offrl_jax.evaluate import evaluate_normalized, make_policy
-from offrl_jax.loggers import make_logger
-from offrl_jax.provenance import fingerprint
-from offrl_jax.results import plot_curves, pretrain_ends_of, write_curves
-from offrl_jax.resume import check_resume, checkpoint_path, group_identity, kept_updates
-from offrl_jax.study import Study, Variant
-from offrl_jax.summary import behaviour_score, summarize, summary_json
-from offrl_jax.workers import run_in_processes
+from offrl_jax.envs.evaluate import evaluate_normalized, make_policy
+from offrl_jax.run.loggers import make_logger
+from offrl_jax.run.provenance import fingerprint
+from offrl_jax.run.results import plot_curves, pretrain_ends_of, write_curves
+from offrl_jax.run.resume import check_resume, checkpoint_path, group_identity, kept_updates
+from offrl_jax.run.study import Study, Variant
+from offrl_jax.run.summary import behaviour_score, summarize, summary_json
+from offrl_jax.system import distributed
+from offrl_jax.system.checkpoint import atomic_write_text, load_checkpoint, save_checkpoint
+from offrl_jax.system.workers import run_in_processes
 
 
 class Diverged(RuntimeError):
@@ -58,10 +58,10 @@ def run_study(study: Study, out_dir: Path, dataset: Dataset, resume: bool = Fals
 
     Variants that differ only in one sweepable hyper-parameter (`sweep_groups`) train as one program unless
     `study.vmap_sweeps` is off. `parallel` > 1 runs that many variants (or groups) at once. On the CPU they run in
-    worker processes pinned to their own cores (`offrl_jax.workers`, 10-20 % faster than threads on 2 cores);
+    worker processes pinned to their own cores (`offrl_jax.system.workers`, 10-20 % faster than threads on 2 cores);
     elsewhere (one GPU), or with `processes=False`, in threads of this process (a jitted chunk releases the GIL).
     Results do not depend on either (each variant's randomness is its own). `logger` ("tensorboard" or "wandb") also
-    sends every evaluation's scores and metrics there (`offrl_jax.loggers`); curves.csv stays the record.
+    sends every evaluation's scores and metrics there (`offrl_jax.run.loggers`); curves.csv stays the record.
     `data_sha256`: the dataset's `fingerprint`, where the caller has computed it already; `verify` False skips the
     resume check for a caller that has just made it (the command line checks every study before the first one
     starts).
@@ -69,7 +69,7 @@ def run_study(study: Study, out_dir: Path, dataset: Dataset, resume: bool = Fals
     data_sha256 = data_sha256 or fingerprint(dataset)  # given by a caller that has it (~0.3 s per 1M rows)
     if resume and verify:  # before anything is written: the checkpoints must belong to this study and this data
         check_resume(study, out_dir, dataset, data_sha256)
-    writer = distributed.is_writer()  # with several processes (offrl_jax.distributed) only process 0 writes files
+    writer = distributed.is_writer()  # with several processes (system.distributed) only process 0 writes files
     if distributed.processes() > 1:
         parallel = 1  # every process runs the groups in the same order
     config_path = out_dir / "config.json"  # a resumed multi-study run may not have begun this study yet

@@ -1,7 +1,7 @@
 """What a study is: variants (an algorithm and its hyper-parameters) on one dataset and env, seeds and budget.
 
 A `Study` is plain data with its JSON (`config.json`): `to_json`/`from_json` for the study itself, `record_json`
-adding every variant's resolved config and the run records (`offrl_jax.provenance`).  `sweep_groups` finds the
+adding every variant's resolved config and the run records (`offrl_jax.run.provenance`).  `sweep_groups` finds the
 variants that can train as one program.
 """
 from __future__ import annotations
@@ -13,8 +13,8 @@ from typing import Any
 from offrl_jax.algos import Config, family_of, make_algorithm, make_config
 from offrl_jax.data.dataset import Dataset
 from offrl_jax.driver import check_call_grid
-from offrl_jax.envs import get_env_spec
-from offrl_jax.provenance import run_record
+from offrl_jax.envs.registry import get_env_spec
+from offrl_jax.run.provenance import run_record
 
 
 def check_file_name(what: str, value: object) -> None:

@@ -18,8 +18,8 @@ import uuid
 from collections import defaultdict
 from pathlib import Path
 
-from offrl_jax.checkpoint import atomic_write_text
-from offrl_jax.results import read_curves
+from offrl_jax.run.results import read_curves
+from offrl_jax.system.checkpoint import atomic_write_text
 
 LOGGERS = ("tensorboard", "wandb")
 _NOT_SCALARS = {"variant", "algo", "seed", "phase", "update", "phase_ended"}

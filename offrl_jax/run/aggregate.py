@@ -13,9 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
-from offrl_jax import stats
-from offrl_jax.checkpoint import atomic_write_bytes
-from offrl_jax.results import all_nan_expected, score_matrix
+from offrl_jax.run import stats
+from offrl_jax.run.results import all_nan_expected, score_matrix
+from offrl_jax.system.checkpoint import atomic_write_bytes
 
 
 def arms(summaries: list[list[dict]]) -> list[str]:

@@ -17,7 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from offrl_jax.envs import make_env, normalized_score
+from offrl_jax.envs.registry import make_env, normalized_score
 
 _POOL = threading.local()  # per thread: variants evaluated in parallel threads never share an env
 

@@ -82,6 +82,8 @@ def make_env(name: str, **kwargs):
         import gymnasium_robotics
 
         gym.register_envs(gymnasium_robotics)
-    from offrl_jax.adroit import with_original_reward  # D4RL's dense reward (gymnasium-robotics >= 1.2.1 flips a sign)
+    from offrl_jax.envs.adroit import (
+        with_original_reward,  # D4RL's dense reward (gymnasium-robotics >= 1.2.1 flips a sign)
+    )
 
     return with_original_reward(gym.make(spec.gym_id, max_episode_steps=spec.max_episode_steps, **kwargs))

@@ -51,7 +51,7 @@ def atomic_write_text(path: str | Path, text: str) -> None:
 def save_checkpoint(path: str | Path, states: Any, update: int, seconds: float, history: list[dict],
                     meta: dict[str, Any] | None = None) -> None:
     """`meta`: what the states belong to and what acting needs, stored beside them: "fingerprint"
-    (`offrl_jax.resume.group_fingerprint`, checked on resume), "members" ([label, seed] per member), "env",
+    (`offrl_jax.run.resume.group_fingerprint`, checked on resume), "members" ([label, seed] per member), "env",
     "obs_mean" and "obs_std" (the observation normalisation of training; `offrl_jax.policy`)."""
     payload = {
         "states": serialization.to_state_dict(states),

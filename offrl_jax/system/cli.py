@@ -1,7 +1,7 @@
 """What every command of the project shares: one-line errors (`error: ...`, exit 2), typed numbers that refuse NaN,
 infinities and out-of-range values while the flags are parsed, a check that an output place is writable before
 any work is spent, and the end of a command (`run_main`): an unhandled Ctrl-C and an XLA_FLAGS that JAX cannot
-start with are one line (`offrl_jax.interrupts` for Ctrl-C while a command starts)."""
+start with are one line (`offrl_jax.system.interrupts` for Ctrl-C while a command starts)."""
 from __future__ import annotations
 
 import argparse
@@ -14,7 +14,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import NoReturn
 
-from offrl_jax.interrupts import exit_code, finish, hand_over
+from offrl_jax.system.interrupts import exit_code, finish, hand_over
 
 
 class UsageError(ValueError):
@@ -196,7 +196,7 @@ def check_xla_flags() -> None:
     (a fatal log, its whole flag list) on an unknown flag or a value it cannot read, so the flags are tried in a
     child process first: about a second, and only when XLA_FLAGS is set (once per command, not again in the
     processes it starts)."""
-    from offrl_jax.workers import USER_XLA_FLAGS
+    from offrl_jax.system.workers import USER_XLA_FLAGS
 
     flags = os.environ.get(USER_XLA_FLAGS, os.environ.get("XLA_FLAGS", "")).strip()
     if not flags or os.environ.get(XLA_FLAGS_CHECKED) == flags:
@@ -219,7 +219,7 @@ def check_xla_flags() -> None:
 
 def run_main(main: Callable[[], object]) -> NoReturn:
     """The `if __name__ == "__main__"` of every command.  Ctrl-C (and SIGTERM) is a KeyboardInterrupt from here on
-    (`offrl_jax.interrupts`); one the command does not handle itself is one line, exit 130 (143 for SIGTERM), and
+    (`offrl_jax.system.interrupts`); one the command does not handle itself is one line, exit 130 (143 for SIGTERM), and
     the process ends at
     once (an interpreter shutting down while XLA was compiling could crash).  An XLA_FLAGS that JAX cannot start
     with is one line, exit 2, before the command's work."""
