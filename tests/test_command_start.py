@@ -117,3 +117,33 @@ def test_an_environment_jax_cannot_import_with_is_one_line(tmp_path):
     assert result.returncode != 0 and not result.stdout
     line = one_line(result.stderr)
     assert line.startswith("error: the command could not start: ValueError:") and "JAX_ENABLE_X64" in line
+
+
+def test_a_signal_during_a_commands_clean_up_does_not_cut_it_and_a_finished_run_exits_0():
+    """The clean-up gives an earlier run back or removes the lock: a SIGTERM or Ctrl-C there is dropped (the results
+    are written, or the command is already ending as interrupted), and so is one after `main` returns."""
+    result = python("import sys; sys.argv[0] = '-m'; import experiments, argparse, os, signal, time\n"
+                    "from offrl_jax.app import command\n"
+                    "from offrl_jax.system.cli import run_main\n"
+                    "for step in ('read', 'start_processes', 'claim_output', 'check_resume', 'run'):\n"
+                    "    setattr(command.Command, step, lambda self, *a: None)\n"
+                    "command.Command.load = lambda self: []\n"
+                    "def clean_up(self, ok):\n"
+                    "    for s in (signal.SIGTERM, signal.SIGINT):\n"
+                    "        os.kill(os.getpid(), s)\n"
+                    "    time.sleep(0.2); print('cleaned up', ok); return None\n"
+                    "command.Command.clean_up = clean_up\n"
+                    "def main():\n"
+                    "    code = command.run_command(lambda a: None, argparse.ArgumentParser(), [])\n"
+                    "    assert signal.getsignal(signal.SIGTERM) is not signal.SIG_IGN  # given back after it\n"
+                    "    return code\n"
+                    "run_main(main)\n")
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip() == "cleaned up True" and result.stderr == ""
+
+
+def test_sigterm_while_a_command_imports_ends_it_in_the_same_one_line_with_143():
+    result = python("import sys; sys.argv[0] = '-m'; import experiments, os, signal, time\n"
+                    "os.kill(os.getpid(), signal.SIGTERM); time.sleep(30); print('went on')")
+    assert result.returncode == 143 and "went on" not in result.stdout
+    assert one_line(result.stderr) == "interrupted while starting; nothing was written"

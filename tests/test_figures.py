@@ -67,3 +67,10 @@ def test_report_replaces_no_figure_and_counts_a_study_once(tmp_path, capsys):
     assert "is given twice" in capsys.readouterr().err
     assert report.main([str(RUNS[0]), "--plot", str(tmp_path / "mine.png"), "--no-reference", "--overwrite"]) == 0
     assert (tmp_path / "mine.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_a_runs_curves_title_says_what_its_band_is_and_one_seed_has_none():
+    from offrl_jax.run.results import curves_title
+    assert (curves_title("hm-td3bc", "hopper-medium", 5)
+            == "hm-td3bc: hopper-medium, 5 seeds, IQM and stratified-bootstrap 95% CI")
+    assert curves_title("hm-td3bc", "hopper-medium", 1) == "hm-td3bc: hopper-medium, 1 seed: no interval"

@@ -133,3 +133,21 @@ def test_more_tasks_than_workers_all_run():
     done = {}
     run_in_processes(report, [(str(i),) for i in range(3)], 2, Bar(), Recorder(), done.__setitem__)
     assert sorted(r["label"] for r in done.values()) == ["0", "1", "2"]
+
+
+def test_a_killed_parent_leaves_no_leaked_semaphore_warning():
+    """The workers' stop is a pipe, not a multiprocessing Event (a named semaphore, which a SIGKILLed parent leaves
+    to Python's resource tracker and its "leaked semaphore" warning)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    code = ("import os, signal, threading\n"
+            "from offrl_jax.system.workers import run_in_processes\n"
+            "from tests.test_workers import Bar, Recorder, fail_or_wait\n"
+            "threading.Timer(3.0, lambda: os.kill(os.getpid(), signal.SIGKILL)).start()\n"
+            "run_in_processes(fail_or_wait, [('waits',), ('waits too',)], 2, Bar(), Recorder(), lambda i, r: None)\n")
+    result = subprocess.run([sys.executable, "-c", code], cwd=Path(__file__).resolve().parents[1],
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == -9, result.stderr
+    assert "leaked" not in result.stderr and "resource_tracker" not in result.stderr, result.stderr

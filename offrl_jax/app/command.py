@@ -36,7 +36,7 @@ from offrl_jax.run.study import Study, Variant
 from offrl_jax.run.summary import print_table
 from offrl_jax.system.checkpoint import atomic_write_text
 from offrl_jax.system.cli import UsageError, check_writable_dir, lock_run_dir, one_line_warnings, print_error
-from offrl_jax.system.interrupts import exit_code
+from offrl_jax.system.interrupts import exit_code, shielded
 
 Build = Callable[[argparse.Namespace], "Study | list[Study]"]
 
@@ -304,7 +304,8 @@ def run_command(build: Build, parser: argparse.ArgumentParser, argv=None,
         code = 130
         return code
     finally:
-        failed = command.clean_up(ok)
+        with shielded():  # the results are written, or the run is ending: its clean-up is not cut half-way
+            failed = command.clean_up(ok)
         if command.local is not None and not ok:  # leave now: JAX's exit handler would wait for the processes
             sys.stdout.flush()
             sys.stderr.flush()

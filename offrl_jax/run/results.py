@@ -120,6 +120,12 @@ def iqm_band(scores: np.ndarray, resamples: int = 2000) -> tuple[np.ndarray, np.
             np.array([e.value if e.high is None else e.high for e in found]))
 
 
+def curves_title(name: str, dataset: str, seeds: int) -> str:
+    """The title of a run's curves.png: what the band is, or that one seed has none."""
+    band = f"{seeds} seeds, IQM and stratified-bootstrap 95% CI" if seeds > 1 else "1 seed: no interval"
+    return f"{name}: {dataset}, {band}"
+
+
 @all_nan_expected()
 def plot_curves(path: Path, study: Study, rows: list[dict], pretrain_ends: dict[str, int]) -> None:
     import matplotlib
@@ -139,9 +145,7 @@ def plot_curves(path: Path, study: Study, rows: list[dict], pretrain_ends: dict[
             ax.axvline(pretrain_ends[v.label], color=line.get_color(), ls=":", lw=1)
     ax.set_xlabel("updates (pre-training included; dotted: end of pre-training)")
     ax.set_ylabel("D4RL-normalised score")
-    n = len(study.seeds)
-    spread = "IQM and stratified-bootstrap 95% CI" if n > 1 else "one seed: no interval"
-    ax.set_title(f"{study.name}: {study.dataset}, {n} seed{'s' if n > 1 else ''}, {spread}", fontsize=10)
+    ax.set_title(curves_title(study.name, study.dataset, len(study.seeds)), fontsize=10)
     ax.grid(alpha=0.3)
     ax.legend()
     fig.tight_layout()

@@ -11,9 +11,11 @@ and tried again every 50 ms; one still put off when the command's `main` returns
 interrupted."""
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import sys
+import threading
 
 from offrl_jax.system.cache import keep_compiled_programs
 
@@ -22,12 +24,13 @@ RETRY_S = 0.05
 
 def _interrupted_while_starting(signum, frame) -> None:
     os.write(2, b"interrupted while starting; nothing was written\n")
-    os._exit(130)
+    os._exit(143 if signum == signal.SIGTERM else 130)
 
 
 def quiet_start() -> None:
     """When Python runs one of the package's modules as a command (`python -m ...`: sys.argv[0] is "-m" while the
-    package imports), a Ctrl-C until `run_main` ends the process at once, with one line and exit 130.  An import
+    package imports), a Ctrl-C (or SIGTERM) until `run_main` ends the process at once, with one line and exit 130
+    (143).  An import
     for any other purpose, or a process that ignores Ctrl-C, is left as it is.  A command also keeps JAX's compiled
     programs (`offrl_jax.system.cache.keep_compiled_programs`)."""
     if sys.argv[:1] != ["-m"]:
@@ -35,6 +38,8 @@ def quiet_start() -> None:
     keep_compiled_programs()
     if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
         signal.signal(signal.SIGINT, _interrupted_while_starting)
+    if signal.getsignal(signal.SIGTERM) is signal.SIG_DFL:  # `kill` while the imports run: the same line, exit 143
+        signal.signal(signal.SIGTERM, _interrupted_while_starting)
     if sys.excepthook is sys.__excepthook__:
         sys.excepthook = _could_not_start
 
@@ -90,12 +95,31 @@ def exit_code(code: int) -> int:
     return 143 if code == 130 and _terminated else code
 
 
+@contextlib.contextmanager
+def shielded():
+    """Ctrl-C and SIGTERM ignored inside: for a command's clean-up, which must not stop half-way (an earlier run being
+    given back, a lock being removed).  One that comes in there is dropped: the command has already written its
+    results, or is already ending as interrupted; `finish` ignores them from when `main` returns."""
+    if threading.current_thread() is not threading.main_thread():  # only the main thread may set handlers
+        yield
+        return
+    before = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    for s in before:
+        signal.signal(s, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        for s, handler in before.items():
+            signal.signal(s, handler)
+
+
 def finish() -> bool:
-    """When the command's `main` has returned: Ctrl-C is ignored from now on (the interpreter is shutting down), any
-    timer is cancelled, and the result says whether a Ctrl-C was still put off (the command then counts as
-    interrupted)."""
+    """When the command's `main` has returned: Ctrl-C and SIGTERM are ignored from now on (the interpreter is
+    shutting down), any timer is cancelled, and the result says whether a Ctrl-C was still put off (the command
+    then counts as interrupted)."""
     global _pending
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
     signal.setitimer(signal.ITIMER_REAL, 0)
     pending, _pending = _pending, False
     return pending
@@ -106,7 +130,7 @@ def hand_over() -> None:
     if signal.getsignal(signal.SIGINT) in (_interrupted_while_starting, signal.default_int_handler):
         signal.signal(signal.SIGINT, during_command)
     # `kill`, a scheduler's stop: the same as Ctrl-C, also for a background job, whose SIGINT the shell ignores
-    if signal.getsignal(signal.SIGTERM) is signal.SIG_DFL:
+    if signal.getsignal(signal.SIGTERM) in (_interrupted_while_starting, signal.SIG_DFL):
         signal.signal(signal.SIGTERM, during_command)
     if sys.excepthook is _could_not_start:  # the command reports its own errors from here on
         sys.excepthook = sys.__excepthook__

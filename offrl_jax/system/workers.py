@@ -75,13 +75,15 @@ class _Bar:
 
 
 class _Stop:
-    """`is_set()`: the parent asked the workers to stop, or the parent is gone."""
+    """`is_set()`: the parent asked the worker to stop (a word on the worker's stop pipe), or the parent is gone
+    (the pipe's end).  A pipe, not a multiprocessing Event: an Event is a named semaphore, which a SIGKILLed parent
+    leaves to Python's resource tracker, and the tracker's "leaked semaphore" warning to the terminal."""
 
-    def __init__(self, event, parent: int):
-        self.event, self.parent = event, parent
+    def __init__(self, conn, parent: int):
+        self.conn, self.parent = conn, parent
 
     def is_set(self) -> bool:
-        return self.event.is_set() or os.getppid() != self.parent
+        return self.conn.poll() or os.getppid() != self.parent
 
 
 class _Recorder:
@@ -161,7 +163,7 @@ def run_in_processes(target: Callable, tasks: list[tuple], parallel: int, bar, r
     current slice and is raised here once they have (Ctrl-C likewise); a worker that dies without a word
     raises ChildProcessError."""
     ctx = multiprocessing.get_context("spawn")  # a fresh interpreter: JAX must not be forked
-    stop = ctx.Event()
+    stops: dict[int, Any] = {}  # index -> the writing end of that worker's stop pipe
     free, pending = core_sets(parallel), list(enumerate(tasks))
     running: dict[int, tuple[Any, Any, list[int]]] = {}  # index -> (process, its pipe's reading end, cores)
     error: BaseException | None = None
@@ -171,12 +173,15 @@ def run_in_processes(target: Callable, tasks: list[tuple], parallel: int, bar, r
         nonlocal error, deadline
         if error is None:
             error, deadline = e, time.monotonic() + STOP_GRACE_S
-            stop.set()
+            for conn in stops.values():
+                with contextlib.suppress(OSError):  # a worker that has ended has closed its end
+                    conn.send("stop")
 
     def finish(index: int, outcome: tuple | None) -> None:
         """The worker `index` ended: with ("done", result), ("error", e), or without a word (None)."""
         process, conn, cores = running.pop(index)
         conn.close()
+        stops.pop(index).close()
         process.join(timeout=10)
         free.append(cores)
         if outcome is None:
@@ -215,13 +220,15 @@ def run_in_processes(target: Callable, tasks: list[tuple], parallel: int, bar, r
                 cores = free.pop(0)
                 receive, send = ctx.Pipe(duplex=False)
                 task_receive, task_send = ctx.Pipe(duplex=False)
-                process = ctx.Process(target=_worker, args=(index, target, task_receive, cores, send, stop,
+                stop_receive, stops[index] = ctx.Pipe(duplex=False)
+                process = ctx.Process(target=_worker, args=(index, target, task_receive, cores, send, stop_receive,
                                                             os.getpid()), daemon=True)
                 with _sigint_ignored():  # inherited: the worker ignores Ctrl-C from its first instruction
                     process.start()  # quick: only small arguments (a big one would hold Ctrl-C off until the
                     # worker has imported its modules and read it)
                 send.close()  # the worker holds the only writing end: its death closes the pipe
                 task_receive.close()
+                stop_receive.close()  # and the only reading end of its stop pipe
                 running[index] = (process, receive, cores)
                 try:
                     task_send.send(task)  # Ctrl-C here is seen at once; the worker then reads a closed pipe
