@@ -4,7 +4,7 @@ not per seed.
     python -m benchmarks.memory [--algos td3bc edac] [--seeds 1 8] [--transitions 1000000] [--json] [--out NAME]
 
 Each (algorithm, S) runs in a fresh subprocess: build a synthetic hopper-shaped dataset of `--transitions` rows, put it
-on the device (`device_data`), initialise S seeds with the real `Driver`, and run 20 updates of every phase
+on the device (`offrl_jax.data.device`), initialise S seeds with the real `Driver`, and run 20 updates of every phase
 (EDAC's soft-return computation over the whole dataset included); the child reports its peak resident set size
 (`ru_maxrss`) and the bytes of the device arrays it holds.
 The dataset (obs, next obs, actions, rewards, flags, returns: 111 MB at 1M hopper rows in float32) is passed to the

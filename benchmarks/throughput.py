@@ -43,7 +43,8 @@ import numpy as np
 from benchmarks.flops import chain_flops, update_flops
 from offrl_jax.algos import make_algorithm, make_config
 from offrl_jax.data.dataset import Dataset
-from offrl_jax.driver import CHUNK, INIT, device_data, make_chunk_fn, member_layout, seed_keys
+from offrl_jax.data.device import device_data
+from offrl_jax.driver import CHUNK, INIT, make_chunk_fn, member_layout, seed_keys
 from offrl_jax.system.cli import OneLineParser, check_writable_file, number, positive_int
 
 OBS_DIM, ACT_DIM, BATCH = 11, 3, 256  # hopper
@@ -150,8 +151,7 @@ def synthetic_data(transitions: int, seed: int = 0) -> dict[str, jax.Array]:
     ds = Dataset(obs[:-1], rng.uniform(-1, 1, (transitions, ACT_DIM)).astype(np.float32),
                  (1.0 + 0.1 * obs[:-1, 0]).astype(np.float32), obs[1:], terminals, timeouts, env="hopper",
                  name="hopper-synthetic", source="synthetic")
-    data, _ = device_data(ds, 0.99)
-    return data
+    return device_data(ds, 0.99).arrays
 
 
 # -------------------------------------------------------------------------------------------------------- timing

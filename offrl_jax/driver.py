@@ -36,12 +36,11 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
 
 from offrl_jax.algos.common import Phase, with_hparams
-from offrl_jax.data.dataset import Dataset, normalize_obs
-from offrl_jax.data.returns import returns_to_go
+from offrl_jax.data.device import DATA_FIELDS
 from offrl_jax.system.distributed import to_host
 
-DATA_FIELDS = ("observations", "actions", "rewards", "next_observations", "terminals", "timeouts", "returns")
-# on the device only for an algorithm that reads them (`uses_next_actions`): ReBRAC's critic penalty
+# beyond a dataset's device form (`offrl_jax.data.device`), on the device only for an algorithm that reads them
+# (`uses_next_actions`): ReBRAC's critic penalty
 OPTIONAL_FIELDS = ("next_actions",)
 
 
@@ -52,24 +51,6 @@ def next_actions(actions: jax.Array, terminals: jax.Array, timeouts: jax.Array) 
     ends = jnp.maximum(terminals, timeouts).at[-1].set(1.0)
     following = jnp.concatenate([actions[1:], actions[-1:]])
     return jnp.where(ends[:, None] > 0, actions, following)
-
-
-def device_data(ds: Dataset, gamma: float, timeout_tail: bool = True,
-                normalize_reward: bool = False) -> tuple[dict[str, jax.Array], tuple]:
-    """Normalised observations + Monte-Carlo returns-to-go on the device (once, shared by every seed); with
-    `normalize_reward` the rewards (and so the returns) are scaled by `Dataset.reward_scale`."""
-    mean, std = ds.obs_stats()
-    data = {
-        "observations": normalize_obs(ds.observations, mean, std),
-        "next_observations": normalize_obs(ds.next_observations, mean, std),
-        "actions": ds.actions,
-        "rewards": ds.rewards * ds.reward_scale() if normalize_reward else ds.rewards,
-        "terminals": ds.terminals,
-        "timeouts": ds.timeouts,
-    }
-    data = {k: jnp.asarray(v, jnp.float32) for k, v in data.items()}
-    data["returns"] = returns_to_go(data["rewards"], data["terminals"], data["timeouts"], gamma, timeout_tail)
-    return data, (mean, std)
 
 
 def seed_keys(seeds: tuple[int, ...], stream: int, index: int | None = None) -> jax.Array:
@@ -239,6 +220,9 @@ def _swept_on_start(phase_for: Callable[[dict[str, jax.Array]], Phase]) -> Calla
 
 
 class Driver:
+    """Trains `algo` for `seeds` (and `sweep` values) on `data`: a dataset's device arrays
+    (`offrl_jax.data.device.DeviceData.arrays`, or any dict of the `DATA_FIELDS`)."""
+
     def __init__(self, algo, data: dict[str, jax.Array], seeds: tuple[int, ...], batch_size: int = 256,
                  devices=None, sweep: tuple[str, tuple[float, ...]] | None = None, members: str | None = None):
         self.algo, self.seeds, self.batch_size, self.sweep = algo, tuple(seeds), batch_size, sweep

@@ -5,13 +5,14 @@ import numpy as np
 import pytest
 
 from offrl_jax.algos import make_algorithm, make_config
-from offrl_jax.driver import Driver, device_data
+from offrl_jax.data.device import device_data
+from offrl_jax.driver import Driver
 
 
 def run(ds, algo_name, seeds, total=400, chunk=100, members=None, **overrides):
     config = make_config(algo_name, ds.env, **overrides)
     algo = make_algorithm(config, ds.obs_dim, ds.act_dim, len(ds))
-    data, _ = device_data(ds, config.gamma)
+    data = device_data(ds, config.gamma).arrays
     chunks = list(Driver(algo, data, seeds, batch_size=32, members=members).run(algo.phases(total), chunk))
     return algo, chunks
 
@@ -52,7 +53,7 @@ def test_edac_soft_pretraining_computes_per_seed_soft_returns(tiny_dataset):
     soft = np.asarray(chunks[-1].states.soft_returns)
     assert soft.shape == (2, len(tiny_dataset)) and np.isfinite(soft).all()
     assert not np.allclose(soft[0], soft[1])  # each seed's own actor and alpha
-    hard, _ = device_data(tiny_dataset, 0.99)
+    hard = device_data(tiny_dataset, 0.99).arrays
     assert not np.allclose(soft[0], np.asarray(hard["returns"]))  # the entropy bonus is in there
     assert "diversity" in chunks[1].metrics and "mc_error" in chunks[1].metrics
 
@@ -66,11 +67,29 @@ def test_normalized_rewards_give_episode_returns_a_range_of_1000():
     ds = Dataset(obs, np.zeros((5, 1), np.float32), rewards, obs, terminals, np.zeros(5, np.float32), env="hopper")
     assert ds.reward_scale() == 1000 / (6 - 4) == 500
     assert ds.select(slice(2, 5)).reward_scale() == 1.0  # one return: nothing to spread
-    plain, _ = device_data(ds, 0.5)
-    scaled, _ = device_data(ds, 0.5, normalize_reward=True)
+    plain = device_data(ds, 0.5).arrays
+    scaled = device_data(ds, 0.5, normalize_reward=True).arrays
     np.testing.assert_allclose(np.asarray(scaled["rewards"]), 500 * rewards)
     np.testing.assert_allclose(np.asarray(scaled["returns"]), 500 * np.asarray(plain["returns"]), rtol=1e-6)
     np.testing.assert_allclose(np.asarray(plain["returns"])[:2], [1 + 0.5 * 3, 3])
+
+
+def test_device_forms_are_made_once_per_discount_and_reward_scaling(tiny_dataset):
+    from offrl_jax.data.device import DeviceForms
+
+    forms = DeviceForms(tiny_dataset)
+    data = forms(0.99)
+    assert forms(0.99, False) is data  # the groups of a run share it
+    assert forms(0.9) is not data and forms(0.99, True) is not data and len(forms.forms) == 3
+    fresh = device_data(tiny_dataset, 0.99)
+    assert list(data.arrays) == list(fresh.arrays)
+    for name, array in fresh.arrays.items():
+        np.testing.assert_array_equal(np.asarray(data.arrays[name]), np.asarray(array), err_msg=name)
+    mean, std = tiny_dataset.obs_stats()
+    np.testing.assert_array_equal(data.obs_mean, mean)
+    np.testing.assert_array_equal(data.obs_std, std)
+    np.testing.assert_allclose(np.asarray(data.arrays["observations"]) * std + mean, tiny_dataset.observations,
+                               atol=1e-4)
 
 
 @pytest.mark.parametrize("algo_name, name, values, kw", [
@@ -83,7 +102,7 @@ def test_vmapped_sweep_member_equals_single_run(tiny_dataset, algo_name, name, v
     and the offline-RL phase included)."""
     config = make_config(algo_name, tiny_dataset.env, **kw, **{name: values[0]})
     algo = make_algorithm(config, tiny_dataset.obs_dim, tiny_dataset.act_dim, len(tiny_dataset))
-    data, _ = device_data(tiny_dataset, config.gamma)
+    data = device_data(tiny_dataset, config.gamma).arrays
     driver = Driver(algo, data, (0, 1), batch_size=32, sweep=(name, values))
     swept = list(driver.run(algo.phases(200), 100))
     assert swept[-1].metrics["finite"].shape == (4,)
@@ -107,7 +126,7 @@ def test_evaluation_interval_does_not_change_training(tiny_dataset):
     evaluation interval that does not divide the pre-training phase, too) gives the same parameters."""
     config = make_config("td3bc", tiny_dataset.env, pretrain="actor+critic", pretrain_updates=200, hidden=(32, 32))
     algo = make_algorithm(config, tiny_dataset.obs_dim, tiny_dataset.act_dim, len(tiny_dataset))
-    data, _ = device_data(tiny_dataset, config.gamma)
+    data = device_data(tiny_dataset, config.gamma).arrays
 
     def states_by_update(chunk):  # copied as they come: the next chunk donates (deletes) the states it is given
         driver = Driver(algo, data, (0, 1), batch_size=32)
@@ -141,7 +160,7 @@ def test_seed_of_a_batched_run_is_the_single_run_up_to_rounding_over_3000_update
     EPYC, 4.5% after 6k): batched seeds agree with single ones as runs on two machines do, in level, not in bits."""
     config = make_config("td3bc", tiny_dataset.env, pretrain="actor+critic", pretrain_updates=1000, hidden=(32, 32))
     algo = make_algorithm(config, tiny_dataset.obs_dim, tiny_dataset.act_dim, len(tiny_dataset))
-    data, _ = device_data(tiny_dataset, config.gamma)
+    data = device_data(tiny_dataset, config.gamma).arrays
     phases = algo.phases(3000)
     single = leaves_as_they_come(Driver(algo, data, (1,), batch_size=32), phases, 1000)
     mapped = leaves_as_they_come(Driver(algo, data, (0, 1, 2), batch_size=32, members="map"), phases, 1000)
@@ -166,7 +185,7 @@ def test_a_chunk_runs_in_slices_that_change_nothing_but_when_the_caller_hears(ti
     assert [slice_calls(c) for c in (1, 200, 1000, 1250, 2477)] == [1, 200, 100, 125, 2477]
     config = make_config("td3bc", tiny_dataset.env, pretrain="none", hidden=(32, 32))
     algo = make_algorithm(config, tiny_dataset.obs_dim, tiny_dataset.act_dim, len(tiny_dataset))
-    data, _ = device_data(tiny_dataset, config.gamma)
+    data = device_data(tiny_dataset, config.gamma).arrays
     heard = []
     (whole,) = [(c, [np.array(x) for x in jax.tree.leaves(c.states)])
                 for c in Driver(algo, data, (0, 1), batch_size=32).run(algo.phases(2000), 2000, on_slice=heard.append)]

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from offrl_jax.algos import ALGOS, FAMILIES, make_config
-from offrl_jax.driver import Driver, device_data
+from offrl_jax.data.device import device_data
+from offrl_jax.driver import Driver
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "extending.md"
 
@@ -65,7 +66,7 @@ def test_registry_example_makes_a_checked_config(doc_namespace):
 def test_sequential_pretraining_example_runs_its_three_phases(doc_namespace, tiny_dataset):
     config = make_config("td3bc", "hopper", pretrain="actor+critic", pretrain_updates=200, hidden=(32, 32))
     algo = doc_namespace["SequentialPretrainTD3BC"](config, tiny_dataset.obs_dim, tiny_dataset.act_dim)
-    data, _ = device_data(tiny_dataset, config.gamma)
+    data = device_data(tiny_dataset, config.gamma).arrays
     phases, metrics, actors = [], [], []
     for chunk in Driver(algo, data, seeds=(0, 1), batch_size=32).run(algo.phases(400), chunk_updates=100):
         # copies: the driver donates each chunk's state buffers to the next

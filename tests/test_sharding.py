@@ -15,11 +15,12 @@ import json, sys, jax, numpy as np
 sys.path.insert(0, "tests")
 from conftest import synthetic_dataset
 from offrl_jax.algos import make_algorithm, make_config
-from offrl_jax.driver import Driver, device_data
+from offrl_jax.data.device import device_data
+from offrl_jax.driver import Driver
 ds = synthetic_dataset(2000)
 config = make_config("td3bc", "hopper", pretrain_updates=100, hidden=(32, 32))
 algo = make_algorithm(config, ds.obs_dim, ds.act_dim, len(ds))
-data, _ = device_data(ds, config.gamma)
+data = device_data(ds, config.gamma).arrays
 driver = Driver(algo, data, (0, 1, 2), batch_size=32)
 chunks = list(driver.run(algo.phases(200), 100))
 leaf = jax.tree.leaves(chunks[-1].states)[0]

@@ -34,7 +34,8 @@ from tqdm.auto import tqdm
 
 from offrl_jax.algos import make_algorithm
 from offrl_jax.data.dataset import Dataset
-from offrl_jax.driver import Driver, device_data
+from offrl_jax.data.device import DeviceData, DeviceForms, device_data
+from offrl_jax.driver import Driver
 from offrl_jax.envs.evaluate import evaluate_normalized, make_policy
 from offrl_jax.run.loggers import make_logger
 from offrl_jax.run.provenance import fingerprint
@@ -93,9 +94,12 @@ def run_study(study: Study, out_dir: Path, dataset: Dataset, resume: bool = Fals
                          logger if writer else None)
     pretrain_ends: dict[str, int] = {}
     groups = study.groups()
+    forms = DeviceForms(dataset)  # the groups run in this process share the dataset's device form(s)
 
     def run(group: tuple[tuple[Variant, ...], str | None]) -> None:
-        end = _run_group(study, *group, dataset, data_sha256, out_dir, resume, bar, recorder)
+        config = study.config(group[0][0].label)
+        data = forms(config.gamma, config.normalize_reward)
+        end = _run_group(study, *group, dataset, data_sha256, out_dir, resume, bar, recorder, data)
         pretrain_ends.update({v.label: end for v in group[0]})
 
     try:
@@ -194,16 +198,17 @@ class _Recorder:
 
 
 def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: Dataset, data_sha256: str,
-               out_dir: Path, resume: bool, bar, recorder: _Recorder) -> int:
+               out_dir: Path, resume: bool, bar, recorder: _Recorder, data: DeviceData | None = None) -> int:
     """Train one variant (S seeds in one program), or a sweep group (values x seeds in one program), evaluating
-    between chunks; returns the number of pre-training updates."""
+    between chunks; returns the number of pre-training updates.  `data`: `ds`'s device form for the group's config,
+    where the caller shares one (a worker process makes its own)."""
     first_variant, labels, seeds = group[0], [v.label for v in group], study.seeds
     config = study.config(first_variant.label)
     algo = make_algorithm(config, ds.obs_dim, ds.act_dim, len(ds))
-    data, (obs_mean, obs_std) = device_data(ds, config.gamma, normalize_reward=config.normalize_reward)
+    data = data if data is not None else device_data(ds, config.gamma, normalize_reward=config.normalize_reward)
     sweep = (swept, tuple(float(dict(v.overrides)[swept]) for v in group)) if swept else None
-    driver = Driver(algo, data, seeds, study.batch_size, sweep=sweep)
-    policy = make_policy(algo.act, obs_mean, obs_std)
+    driver = Driver(algo, data.arrays, seeds, study.batch_size, sweep=sweep)
+    policy = make_policy(algo.act, data.obs_mean, data.obs_std)
     phases = algo.phases(study.updates)
     pretrain_end = sum(p.steps for p in phases if p.name != "offline_rl")
     last_update = sum(p.steps for p in phases)  # TD3 trims an odd budget to its 2-update call grid
@@ -211,7 +216,7 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
     ckpt_path = checkpoint_path(out_dir, group)
     meta = {"identity": json.dumps(group_identity(study, group, data_sha256)), "env": study.env,
             "members": [[v.label, seed] for v in group for seed in seeds],
-            "obs_mean": np.asarray(obs_mean, np.float32), "obs_std": np.asarray(obs_std, np.float32)}
+            "obs_mean": data.obs_mean, "obs_std": data.obs_std}
     states, start, seconds, rows = None, 0, 0.0, []
     writer = distributed.is_writer()
 

@@ -57,13 +57,14 @@ def train_bc(demos: Dataset, updates: int = DEFAULT_BC_UPDATES, seed: int = 0, b
     import jax.numpy as jnp
 
     from offrl_jax.algos import make_algorithm, make_config
-    from offrl_jax.driver import Driver, device_data
+    from offrl_jax.data.device import device_data
+    from offrl_jax.driver import Driver
     from offrl_jax.envs.evaluate import make_policy
 
     config = make_config("bc", "door")
     algo = make_algorithm(config, demos.obs_dim, demos.act_dim, len(demos))
-    data, (obs_mean, obs_std) = device_data(demos, config.gamma)
-    driver = Driver(algo, data, (seed,), batch_size)
+    data = device_data(demos, config.gamma)
+    driver = Driver(algo, data.arrays, (seed,), batch_size)
     bar = None
     if progress:
         from tqdm import tqdm
@@ -78,7 +79,7 @@ def train_bc(demos: Dataset, updates: int = DEFAULT_BC_UPDATES, seed: int = 0, b
     if bar is not None:
         bar.close()
     states = last.states
-    policy = make_policy(algo.act, obs_mean, obs_std)
+    policy = make_policy(algo.act, data.obs_mean, data.obs_std)
 
     def act(obs: np.ndarray) -> np.ndarray:
         return np.asarray(policy(states, jnp.asarray(obs, jnp.float32)[None]))[0]
@@ -86,8 +87,8 @@ def train_bc(demos: Dataset, updates: int = DEFAULT_BC_UPDATES, seed: int = 0, b
     actor_vars = jax.tree.map(lambda x: np.asarray(x[0]), states.actor.params)
     info = {"updates": int(last.update), "batch_size": batch_size, "seed": seed, "hidden": list(config.hidden),
             "layer_norm": bool(config.actor_layer_norm), "final_bc_loss": float(last.metrics["bc_loss"][0]),
-            "train_s": round(time.time() - tic, 1), "obs_mean": np.asarray(obs_mean).tolist(),
-            "obs_std": np.asarray(obs_std).tolist(), "actor_variables": actor_vars}
+            "train_s": round(time.time() - tic, 1), "obs_mean": data.obs_mean.tolist(),
+            "obs_std": data.obs_std.tolist(), "actor_variables": actor_vars}
     return act, info
 
 

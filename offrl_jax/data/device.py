@@ -1,0 +1,64 @@
+"""A dataset's device form: the arrays training samples from, on the device once and shared by every seed, with the
+observation statistics that normalised them (which evaluation, checkpoints and `offrl_jax.policy` apply to raw
+observations).
+
+It depends on the dataset and on two hyper-parameters only: the discount of the returns-to-go and whether rewards are
+normalised.  Variants of a study that agree on both read the same arrays (`DeviceForms`).
+"""
+from __future__ import annotations
+
+import dataclasses
+import threading
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from offrl_jax.data.dataset import Dataset, normalize_obs
+from offrl_jax.data.returns import returns_to_go
+
+DATA_FIELDS = ("observations", "actions", "rewards", "next_observations", "terminals", "timeouts", "returns")
+
+
+@dataclasses.dataclass(frozen=True)
+class DeviceData:
+    """`arrays`: every field of `DATA_FIELDS`, float32 on the device, T rows each: observations and next observations
+    normalised with (`obs_mean`, `obs_std`), rewards (scaled by `Dataset.reward_scale` where the rewards are
+    normalised), and the Monte-Carlo returns-to-go of those rewards.  `obs_mean`, `obs_std`: (obs_dim,) float32 on
+    the host (`Dataset.obs_stats`)."""
+    arrays: dict[str, jax.Array]
+    obs_mean: np.ndarray
+    obs_std: np.ndarray
+
+
+def device_data(ds: Dataset, gamma: float, timeout_tail: bool = True, normalize_reward: bool = False) -> DeviceData:
+    """`ds` in its device form: returns-to-go discounted by `gamma` (`timeout_tail`: see `returns_to_go`); with
+    `normalize_reward` the rewards, and so the returns, are scaled by `Dataset.reward_scale`."""
+    mean, std = ds.obs_stats()
+    arrays = {
+        "observations": normalize_obs(ds.observations, mean, std),
+        "next_observations": normalize_obs(ds.next_observations, mean, std),
+        "actions": ds.actions,
+        "rewards": ds.rewards * ds.reward_scale() if normalize_reward else ds.rewards,
+        "terminals": ds.terminals,
+        "timeouts": ds.timeouts,
+    }
+    arrays = {k: jnp.asarray(v, jnp.float32) for k, v in arrays.items()}
+    arrays["returns"] = returns_to_go(arrays["rewards"], arrays["terminals"], arrays["timeouts"], gamma, timeout_tail)
+    return DeviceData(arrays, mean, std)
+
+
+class DeviceForms:
+    """The device forms of one dataset, each made on its first request and then shared: `forms(gamma,
+    normalize_reward)` is `device_data(ds, gamma, normalize_reward=normalize_reward)`, computed once per distinct
+    pair.  Thread-safe: a second request for a form being made waits for it."""
+
+    def __init__(self, ds: Dataset):
+        self.ds, self.forms, self.lock = ds, {}, threading.Lock()
+
+    def __call__(self, gamma: float, normalize_reward: bool = False) -> DeviceData:
+        key = (float(gamma), bool(normalize_reward))
+        with self.lock:
+            if key not in self.forms:
+                self.forms[key] = device_data(self.ds, gamma, normalize_reward=normalize_reward)
+            return self.forms[key]
