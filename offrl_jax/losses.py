@@ -1,8 +1,9 @@
 """Every loss and target as a small pure function of arrays (jit-able, no networks, no hidden state).
 
 Shapes: B = batch, A = action dim, N = ensemble size, M = sampled actions per state.  Q-values of an ensemble are
-(N, B).  Each loss returns a scalar; targets return (B,).  `sg` = `jax.lax.stop_gradient`.  The shapes are asserted
-(chex) where a wrong one would broadcast silently: they fail when the function is traced, naming the argument.
+(N, B).  Each loss returns a scalar; targets return (B,).  `sg` = `jax.lax.stop_gradient`.  The documented shapes are
+asserted (`assert_shapes`, chex) where a wrong one would broadcast silently: they fail when the function is traced,
+naming the argument.
 """
 from __future__ import annotations
 
@@ -14,12 +15,26 @@ import jax.numpy as jnp
 
 sg = jax.lax.stop_gradient
 
+
+def assert_shapes(**arrays: tuple[jax.Array | float, str]) -> None:
+    """Assert the shapes a docstring gives: `q=(q, "NB")` is q: (N, B), `alpha=(alpha, "")` a scalar, and a letter
+    has one size across the arguments.  Shapes are static, so this runs when the function is traced; chex's
+    AssertionError names the argument and its documented shape."""
+    sizes: dict[str, tuple[str, int]] = {}
+    for name, (x, dims) in arrays.items():
+        documented = f"{name}: ({', '.join(dims)}{',' if len(dims) == 1 else ''})"
+        chex.assert_rank(x, len(dims), custom_message=documented)
+        for axis, letter in enumerate(dims):
+            first, size = sizes.setdefault(letter, (name, x.shape[axis]))
+            chex.assert_axis_dimension(x, axis, size, custom_message=f"{documented}, {letter} as in {first}")
+
+
 # --------------------------------------------------------------------------------------------- supervised losses
 
 
 def bc_loss(pred_actions: jax.Array, actions: jax.Array) -> jax.Array:
     """Behaviour cloning, MSE over every element.  pred_actions, actions: (B, A) -> ()."""
-    chex.assert_equal_shape([pred_actions, actions])
+    assert_shapes(pred_actions=(pred_actions, "BA"), actions=(actions, "BA"))
     return jnp.mean((pred_actions - actions) ** 2)
 
 
@@ -29,13 +44,13 @@ def soft_bc_loss(log_prob_sampled: jax.Array, log_prob_data: jax.Array, alpha: j
     `log_prob_data` is log pi of the dataset action (clipped to +-(1-1e-6) before atanh by the caller's
     `tanh_gaussian_log_prob`); alpha is treated as a constant here (its own loss is `temperature_loss`).
     """
+    assert_shapes(log_prob_sampled=(log_prob_sampled, "B"), log_prob_data=(log_prob_data, "B"), alpha=(alpha, ""))
     return jnp.mean(sg(alpha) * log_prob_sampled - log_prob_data)
 
 
 def mc_critic_loss(q: jax.Array, returns: jax.Array) -> jax.Array:
     """Monte-Carlo value error: sum over critics of the batch-mean squared error.  q: (N, B), returns: (B,) -> ()."""
-    chex.assert_rank([q, returns], [2, 1])
-    chex.assert_equal_shape_suffix([q, returns], 1)
+    assert_shapes(q=(q, "NB"), returns=(returns, "B"))
     return jnp.sum(jnp.mean((q - returns[None]) ** 2, axis=-1))
 
 
@@ -48,11 +63,13 @@ def td_target(reward: jax.Array, terminal: jax.Array, next_value: jax.Array, gam
     Only true terminals stop bootstrapping: a time-out is not the end of the task, so its successor's value is
     bootstrapped through (`terminal` must be the terminal flag, not terminal-or-timeout).
     """
+    assert_shapes(reward=(reward, "B"), terminal=(terminal, "B"), next_value=(next_value, "B"))
     return reward + gamma * (1.0 - terminal) * next_value
 
 
 def clipped_double_q(next_q: jax.Array) -> jax.Array:
     """TD3 / SAC-N pessimism: min over the ensemble.  (N, B) -> (B,)."""
+    assert_shapes(next_q=(next_q, "NB"))
     return jnp.min(next_q, axis=0)
 
 
@@ -64,16 +81,19 @@ def target_policy_smoothing(key: jax.Array, action: jax.Array, noise: float = 0.
 
 def soft_value(next_q: jax.Array, next_log_prob: jax.Array, alpha: jax.Array) -> jax.Array:
     """SAC / EDAC soft value min_i Q_i(s', a') - alpha log pi(a'|s').  next_q (N, B), next_log_prob (B,) -> (B,)."""
+    assert_shapes(next_q=(next_q, "NB"), next_log_prob=(next_log_prob, "B"), alpha=(alpha, ""))
     return clipped_double_q(next_q) - alpha * next_log_prob
 
 
 def mix_targets(mc_return: jax.Array, td: jax.Array, lam: float) -> jax.Array:
     """Eq. 5 target mixing R~ = (1 - lam) R + lam (r + gamma Q').  (B,), (B,) -> (B,)."""
+    assert_shapes(mc_return=(mc_return, "B"), td=(td, "B"))
     return (1.0 - lam) * mc_return + lam * td
 
 
 def q_transformer_target(mc_return: jax.Array, td: jax.Array) -> jax.Array:
     """Q-Transformer / Wilcox et al. target max(MC, r + gamma Q') (Appendix F).  (B,), (B,) -> (B,)."""
+    assert_shapes(mc_return=(mc_return, "B"), td=(td, "B"))
     return jnp.maximum(mc_return, td)
 
 
@@ -82,6 +102,7 @@ def critic_regression_loss(q: jax.Array, target: jax.Array) -> jax.Array:
 
     The target is treated as a constant.  Same arithmetic as `mc_critic_loss`; kept separate by name for clarity.
     """
+    assert_shapes(q=(q, "NB"), target=(target, "B"))
     return mc_critic_loss(q, sg(target))
 
 
@@ -121,6 +142,7 @@ def pretrain_critic_loss(q: jax.Array, mc_return: jax.Array, td_fn: Callable[[],
     per_critic: "sum" (TD3+BC's twin critics) or "mean" (EDAC's ensemble, as the authors' `pretrain_soft_critic`)
     over the N critics; normalised losses ("loss" mode, lam > 0) are the same either way.
     """
+    assert_shapes(q=(q, "NB"), mc_return=(mc_return, "B"))
     scale = 1.0 if per_critic == "sum" else 1.0 / q.shape[0]
     if lam == 0.0:
         return scale * mc_critic_loss(q, mc_return)
@@ -131,8 +153,7 @@ def pretrain_critic_loss(q: jax.Array, mc_return: jax.Array, td_fn: Callable[[],
 
 def action_penalty(pred_actions: jax.Array, actions: jax.Array) -> jax.Array:
     """ReBRAC's behaviour penalty per row, ||a~ - a||^2 summed over the action dims.  (B, A), (B, A) -> (B,)."""
-    chex.assert_rank(pred_actions, 2)
-    chex.assert_equal_shape([pred_actions, actions])
+    assert_shapes(pred_actions=(pred_actions, "BA"), actions=(actions, "BA"))
     return jnp.sum((pred_actions - actions) ** 2, axis=-1)
 
 
@@ -140,15 +161,15 @@ def rebrac_next_value(next_q: jax.Array, next_pred_actions: jax.Array, next_acti
                       beta: float) -> jax.Array:
     """ReBRAC's penalised next value min_i Q'_i(s', a~') - beta ||a~' - a'||^2, a~' the target policy's (smoothed)
     action, a' the dataset's next action.  next_q (N, B), actions (B, A) -> (B,)."""
-    chex.assert_rank(next_q, 2)
-    chex.assert_equal_shape_prefix([next_q[0], next_pred_actions], 1)
+    assert_shapes(next_q=(next_q, "NB"), next_pred_actions=(next_pred_actions, "BA"),
+                  next_actions=(next_actions, "BA"))
     return clipped_double_q(next_q) - beta * action_penalty(next_pred_actions, next_actions)
 
 
 def expectile_loss(diff: jax.Array, expectile: float) -> jax.Array:
     """IQL's asymmetric squared error mean(|expectile - 1(diff < 0)| diff^2), diff = target - prediction: its
     minimiser is the target's `expectile` (0.5: half the mean squared error, minimised by the mean).  (B,) -> ()."""
-    chex.assert_rank(diff, 1)
+    assert_shapes(diff=(diff, "B"))
     weight = jnp.where(diff < 0, 1.0 - expectile, expectile)
     return jnp.mean(weight * diff ** 2)
 
@@ -163,8 +184,7 @@ def td3bc_actor_loss(q: jax.Array, pred_actions: jax.Array, actions: jax.Array, 
     q: (B,) (the first critic's value of the policy action), pred_actions, actions: (B, A) -> ().  CORL and the
     authors divide by mean|Q| alone (q_scale_eps = 0).
     """
-    chex.assert_rank(q, 1)
-    chex.assert_equal_shape_prefix([q, pred_actions], 1)
+    assert_shapes(q=(q, "B"), pred_actions=(pred_actions, "BA"), actions=(actions, "BA"))
     lmbda = alpha / (sg(jnp.mean(jnp.abs(q))) + q_scale_eps)
     return -lmbda * jnp.mean(q) + bc_loss(pred_actions, actions)
 
@@ -173,8 +193,7 @@ def rebrac_actor_loss(q: jax.Array, pred_actions: jax.Array, actions: jax.Array,
                       normalize_q: bool = True) -> jax.Array:
     """ReBRAC actor: mean(beta ||pi(s) - a||^2 - lmbda Q(s, pi(s))), lmbda = 1 / sg(mean |Q|) (1 without
     normalize_q).  q: (B,) (min over the ensemble of the policy action's value), actions: (B, A) -> ()."""
-    chex.assert_rank(q, 1)
-    chex.assert_equal_shape_prefix([q, pred_actions], 1)
+    assert_shapes(q=(q, "B"), pred_actions=(pred_actions, "BA"), actions=(actions, "BA"))
     lmbda = 1.0 / sg(jnp.mean(jnp.abs(q))) if normalize_q else 1.0
     return jnp.mean(beta * action_penalty(pred_actions, actions) - lmbda * q)
 
@@ -183,18 +202,19 @@ def awr_actor_loss(neg_log_lik: jax.Array, advantage: jax.Array, beta: float, ma
     """IQL's advantage-weighted regression: mean(min(exp(beta sg(A)), max_weight) * nll), nll the per-row negative
     log-likelihood of the dataset action (or its squared error, for a deterministic actor).  (B,), (B,) -> ().
     beta = 0 weighs every row 1: behaviour cloning."""
-    chex.assert_rank(neg_log_lik, 1)
-    chex.assert_equal_shape([neg_log_lik, advantage])
+    assert_shapes(neg_log_lik=(neg_log_lik, "B"), advantage=(advantage, "B"))
     return jnp.mean(jnp.minimum(jnp.exp(beta * sg(advantage)), max_weight) * neg_log_lik)
 
 
 def sac_actor_loss(q: jax.Array, log_prob: jax.Array, alpha: jax.Array) -> jax.Array:
     """SAC-N / EDAC actor: E[alpha log pi(a~|s) - min_i Q_i(s, a~)].  q: (N, B), log_prob: (B,) -> ()."""
+    assert_shapes(q=(q, "NB"), log_prob=(log_prob, "B"), alpha=(alpha, ""))
     return jnp.mean(sg(alpha) * log_prob - clipped_double_q(q))
 
 
 def temperature_loss(log_alpha: jax.Array, log_prob: jax.Array, target_entropy: float) -> jax.Array:
     """SAC temperature: -E[log_alpha * sg(log pi + H_target)].  log_alpha: (), log_prob: (B,) -> ()."""
+    assert_shapes(log_alpha=(log_alpha, ""), log_prob=(log_prob, "B"))
     return -jnp.mean(log_alpha * sg(log_prob + target_entropy))
 
 
@@ -206,6 +226,7 @@ def edac_diversity_loss(action_grads: jax.Array) -> jax.Array:
 
     action_grads: (N, B, A), the gradient of each member's Q at the dataset action -> ().  Multiply by eta outside.
     """
+    assert_shapes(action_grads=(action_grads, "NBA"))
     n = action_grads.shape[0]
     # ||g|| with a zero-safe gradient: d||g||/dg at g = 0 is NaN in JAX (torch's norm, in the authors' code, gives 0)
     sq = jnp.sum(action_grads**2, axis=-1, keepdims=True)
@@ -222,6 +243,7 @@ def cql_uniform_penalty(q_uniform: jax.Array, q_data: jax.Array, temperature: fl
     sum over critics of mean_b [ T logsumexp_m(Q(s_b, a_u^m) / T) - Q(s_b, a_b) ], a_u ~ U[-1, 1]^A.
     q_uniform: (N, B, M), q_data: (N, B) -> ().
     """
+    assert_shapes(q_uniform=(q_uniform, "NBM"), q_data=(q_data, "NB"))
     lse = temperature * jax.nn.logsumexp(q_uniform / temperature, axis=-1)
     return jnp.sum(jnp.mean(lse - q_data, axis=-1))
 
@@ -243,6 +265,9 @@ def cql_importance_penalty(
     mean_b [T logsumexp(cat(Q_rand - A log 0.5, Q_pi - log pi, Q_pi' - log pi') / T) - Q(s, a_data)] -> ().
     Multiply by alpha_cql outside.
     """
+    assert_shapes(q_random=(q_random, "NBM"), q_policy=(q_policy, "NBM"), log_prob_policy=(log_prob_policy, "BM"),
+                  q_next_policy=(q_next_policy, "NBM"), log_prob_next_policy=(log_prob_next_policy, "BM"),
+                  q_data=(q_data, "NB"))
     cat = jnp.concatenate(
         [
             q_random - act_dim * jnp.log(0.5),

@@ -239,15 +239,38 @@ def test_gaussian_log_prob():
     A(gaussian_log_prob(jnp.zeros((1, 2)), jnp.zeros(2), jnp.ones((1, 2))), [-1.0 - np.log(2 * np.pi)], rtol=1e-6)
 
 
-@pytest.mark.parametrize("call", [
-    lambda: L.mc_critic_loss(jnp.zeros((2, 5)), jnp.zeros((5, 1))),  # returns (B, 1) would broadcast to (2, 5, 5)
-    lambda: L.td3bc_actor_loss(jnp.zeros((2, 5)), jnp.zeros((5, 3)), jnp.zeros((5, 3)), 2.5),  # all critics' Q
-    lambda: L.bc_loss(jnp.zeros((5, 3)), jnp.zeros((5, 1))),
-    lambda: L.awr_actor_loss(jnp.zeros(5), jnp.zeros((5, 1)), 3.0),
-    lambda: L.rebrac_actor_loss(jnp.zeros(4), jnp.zeros((5, 3)), jnp.zeros((5, 3)), 0.1),
-])
-def test_a_wrong_shape_fails_when_traced(call):
-    with pytest.raises(AssertionError):
+Z = jnp.zeros
+
+
+@pytest.mark.parametrize("argument, call", [
+    ("returns", lambda: L.mc_critic_loss(Z((2, 5)), Z((5, 1)))),  # returns (B, 1) would broadcast to (2, 5, 5)
+    ("q", lambda: L.td3bc_actor_loss(Z((2, 5)), Z((5, 3)), Z((5, 3)), 2.5)),  # all critics' Q
+    ("actions", lambda: L.bc_loss(Z((5, 3)), Z((5, 1)))),
+    ("advantage", lambda: L.awr_actor_loss(Z(5), Z((5, 1)), 3.0)),
+    ("pred_actions", lambda: L.rebrac_actor_loss(Z(4), Z((5, 3)), Z((5, 3)), 0.1)),
+    ("log_prob_data", lambda: L.soft_bc_loss(Z(5), Z((5, 1)), 1.0)),
+    ("next_value", lambda: L.td_target(Z(5), Z(5), Z((5, 1)), 0.99)),  # V(s') (B, 1): a (B, B) target
+    ("terminal", lambda: L.td_target(Z(5), Z(4), Z(5), 0.99)),
+    ("next_q", lambda: L.clipped_double_q(Z((2, 5, 1)))),
+    ("next_log_prob", lambda: L.soft_value(Z((2, 5)), Z((5, 1)), 0.1)),
+    ("alpha", lambda: L.soft_value(Z((2, 5)), Z(5), Z(5))),
+    ("td", lambda: L.mix_targets(Z(5), Z((5, 1)), 0.5)),
+    ("mc_return", lambda: L.q_transformer_target(Z((5, 1)), Z(5))),
+    ("target", lambda: L.critic_regression_loss(Z((2, 5)), Z((5, 1)))),
+    ("mc_return", lambda: L.pretrain_critic_loss(Z((2, 5)), Z((5, 1)), lambda: Z(5), 0.5)),
+    ("actions", lambda: L.action_penalty(Z((5, 3)), Z((5, 1)))),
+    ("next_actions", lambda: L.rebrac_next_value(Z((2, 5)), Z((5, 3)), Z((5, 1)), 0.1)),
+    ("diff", lambda: L.expectile_loss(Z((5, 1)), 0.7)),
+    ("log_prob", lambda: L.sac_actor_loss(Z((2, 5)), Z((5, 1)), 1.0)),
+    ("log_alpha", lambda: L.temperature_loss(Z(5), Z(5), -3.0)),  # one log alpha per row
+    ("action_grads", lambda: L.edac_diversity_loss(Z((2, 5)))),
+    ("q_data", lambda: L.cql_uniform_penalty(Z((2, 5, 10)), Z((2, 5, 1)))),
+    ("log_prob_next_policy", lambda: L.cql_importance_penalty(Z((2, 5, 10)), Z((2, 5, 10)), Z((5, 10)),
+                                                              Z((2, 5, 10)), Z((5, 1)), Z((2, 5)), 3)),
+], ids=lambda a: a if isinstance(a, str) else "")
+def test_a_wrong_shape_fails_when_traced_naming_the_argument(argument, call):
+    named = rf"\[{argument}: \("  # chex's message ends with the argument's documented shape, e.g. [returns: (B,)]
+    with pytest.raises(AssertionError, match=named):
         call()
-    with pytest.raises(AssertionError):
+    with pytest.raises(AssertionError, match=named):
         jax.jit(lambda: call())()
