@@ -7,6 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from offrl_jax.data.generate import sac, ship
@@ -101,6 +102,25 @@ def test_sac_refuses_more_steps_than_memory_holds_before_writing(tmp_path, capsy
     assert capsys.readouterr().err.splitlines() == ["error: 2,000,000,000 steps: the replay of every transition does "
                                                     "not fit in memory"]
     assert not (tmp_path / "out").exists()
+
+
+def test_sac_refuses_to_resume_a_state_of_another_layout(tmp_path, capsys):
+    """A state.msgpack whose fields are not `SACState`'s (here the earlier layout: separate actor_opt, critic_opt and
+    target_critic) is refused in one line by the command and by `train`, before anything is written."""
+    from flax.serialization import msgpack_serialize
+
+    out = tmp_path / "run"
+    (out / "replay").mkdir(parents=True)
+    (out / "run.json").write_text(json.dumps(RUN_JSON))
+    (out / "state.json").write_text(json.dumps({"step": 50, "rng": {}}))
+    np.savez(out / "replay" / "0000000_0000050.npz", rewards=np.zeros(50, np.float32))
+    fields = ("actor", "critic", "target_critic", "log_alpha", "actor_opt", "critic_opt", "alpha_opt", "key")
+    (out / "state.msgpack").write_bytes(msgpack_serialize({f: {"x": np.zeros(2, np.float32)} for f in fields}))
+    before = tree(tmp_path)
+    assert "a SAC state of the earlier layout" in refused(sac.main, ["--resume", out], capsys)
+    with pytest.raises(ValueError, match="cannot resume: start a new run"):
+        sac.train("hopper", 60, out, resume=True, progress=False)
+    assert tree(tmp_path) == before
 
 
 def test_sac_runs_resumes_and_keeps_its_run(tmp_path, capsys):

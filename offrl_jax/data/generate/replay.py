@@ -68,3 +68,26 @@ def load_replay(run_dir: str | Path, upto: int | None = None) -> dict[str, np.nd
             raise ValueError(f"{run_dir} holds {len(data['rewards'])} transitions, fewer than the {upto} asked for")
         data = {k: v[:upto] for k, v in data.items()}
     return data
+
+
+def reload_replay(run_dir: Path, buffer: ReplayBuffer, start: int) -> None:
+    """Refill `buffer` with the first `start` transitions of the run in `run_dir`, delete the chunks of later steps, and
+    end the episode cut at `start` with a time-out (rewriting its chunk): a run resumed at `start` goes on from a
+    valid sequence of episodes."""
+    for f in (run_dir / "replay").glob("*.npz"):
+        if chunk_range(f)[0] >= start:
+            f.unlink()
+    if start == 0:
+        return
+    data = load_replay(run_dir, upto=start)
+    for k, v in data.items():
+        buffer.data[k][:start] = v
+    buffer.size = start
+    if not (buffer.data["terminals"][start - 1] or buffer.data["timeouts"][start - 1]):
+        buffer.data["timeouts"][start - 1] = 1.0  # the interrupted episode ends here; rewrite its chunk
+        last = max((run_dir / "replay").glob("*.npz"), key=lambda f: chunk_range(f)[1])
+        lo, hi = chunk_range(last)
+        if hi > start:  # the last chunk runs past the saved state: cut it there
+            last.unlink()
+            last = run_dir / "replay" / f"{lo:07d}_{start:07d}.npz"
+        buffer.save_range(last, lo, start)

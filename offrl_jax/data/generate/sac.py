@@ -1,17 +1,17 @@
-"""Online SAC in JAX, the behaviour-policy trainer of the generated D4RL-style datasets.
+"""Online SAC in JAX, the behaviour-policy trainer of the generated D4RL-style datasets: the training loop, its run
+directory and the command line.  The learner (networks, losses, the update) is `sac_learner.SAC`.
 
-One jitted update per env step (critic, actor and temperature in one call, fused with choosing the next action),
-actor 256-256 tanh-Gaussian and twin critics 256-256 (`CriticEnsemble(num=2)`), no LayerNorm, auto temperature with
-target entropy -act_dim, Adam 3e-4, batch 256, gamma 0.99, tau 0.005, uniform-random warm-up.  Bootstraps through
-time-outs (only true terminals stop the target).  Losses come from `offrl_jax.losses`.
+Uniform-random actions for the first `warmup_steps` env steps, then one jitted update per env step fused with choosing
+the next action (`SAC.update_and_act`) on a minibatch of the replay of every transition seen so far.
 
 A run directory holds
     log.jsonl                     one line per evaluation (step, returns, normalised score, steps/s, losses, ...)
     checkpoints/actor_<step>.msgpack   actor variables after `step` env steps (flax msgpack, ~300 KB)
     replay/<start>_<end>.npz      every transition seen, in order, one file per evaluation period
     run.json                      config, env, seed, final step, why it stopped
-    state.msgpack, state.json     the whole training state (networks, targets, optimisers, temperature, keys) and the
-                                  numpy RNG at the last evaluation: `--resume` continues from there
+    state.msgpack, state.json     the whole training state (`sac_learner.SACState`: networks, targets, optimisers,
+                                  temperature, key) and the numpy RNG at the last evaluation: `--resume` continues
+                                  from there (a state.msgpack of another layout is refused)
 
 CLI:  python -m offrl_jax.data.generate.sac --env hopper --steps 1000000 --out DIR [--stop-score 100]
       python -m offrl_jax.data.generate.sac --resume DIR [--steps N]      # continue a stopped or killed run
@@ -24,25 +24,27 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import functools
 import json
 import signal
 import sys
 import time
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any
 
 import flax.serialization
-import jax
-import jax.numpy as jnp
 import numpy as np
-import optax
 
-from offrl_jax import losses
-from offrl_jax.data.generate.collect import ACTOR_HIDDEN, actor_module, evaluate, make_gen_env
-from offrl_jax.data.generate.replay import ReplayBuffer, chunk_range, load_replay
+from offrl_jax.data.generate.collect import evaluate, make_gen_env
+from offrl_jax.data.generate.replay import ReplayBuffer, chunk_range, load_replay, reload_replay
+from offrl_jax.data.generate.sac_learner import (
+    SACConfig,
+    SACState,
+    check_state_bytes,
+    make_sac,
+    state_from_bytes,
+    state_to_bytes,
+)
 from offrl_jax.envs.registry import get_env_spec, normalized_score
-from offrl_jax.nets import CriticEnsemble, sample_tanh_gaussian
 from offrl_jax.system.checkpoint import atomic_write_bytes, atomic_write_text
 from offrl_jax.system.cli import (
     OneLineParser,
@@ -54,117 +56,6 @@ from offrl_jax.system.cli import (
     print_error,
     seed_int,
 )
-
-
-@dataclasses.dataclass(frozen=True)
-class SACConfig:
-    hidden: tuple[int, ...] = ACTOR_HIDDEN
-    lr: float = 3e-4
-    batch_size: int = 256
-    gamma: float = 0.99
-    tau: float = 0.005
-    warmup_steps: int = 5_000
-    init_log_alpha: float = 0.0
-
-
-class SACState(NamedTuple):
-    actor: Any
-    critic: Any
-    target_critic: Any
-    log_alpha: jax.Array
-    actor_opt: Any
-    critic_opt: Any
-    alpha_opt: Any
-    key: jax.Array
-
-
-class SAC:
-    """Modules, init and the jitted fused step of SAC for one (obs_dim, act_dim)."""
-
-    def __init__(self, obs_dim: int, act_dim: int, cfg: SACConfig = SACConfig()):
-        self.obs_dim, self.act_dim, self.cfg = obs_dim, act_dim, cfg
-        self.actor = actor_module(act_dim, cfg.hidden)
-        self.critic = CriticEnsemble(num=2, hidden=cfg.hidden, layer_norm=False)
-        self.opt = optax.adam(cfg.lr)
-        self.target_entropy = -float(act_dim)
-        self.update = jax.jit(self._update)
-        self.update_and_act = jax.jit(self._update_and_act)
-
-    def init(self, seed: int) -> SACState:
-        return jax.jit(self._init)(jax.random.PRNGKey(seed))
-
-    def _init(self, key: jax.Array) -> SACState:
-        key, k_actor, k_critic = jax.random.split(key, 3)
-        obs = jnp.zeros((1, self.obs_dim))
-        act = jnp.zeros((1, self.act_dim))
-        actor = self.actor.init(k_actor, obs)
-        critic = self.critic.init(k_critic, obs, act)
-        log_alpha = jnp.asarray(self.cfg.init_log_alpha, jnp.float32)
-        return SACState(
-            actor, critic, critic, log_alpha, self.opt.init(actor), self.opt.init(critic), self.opt.init(log_alpha), key
-        )
-
-    def _update(self, state: SACState, batch: dict[str, jax.Array]) -> tuple[SACState, dict[str, jax.Array]]:
-        cfg = self.cfg
-        key, k_next, k_pi = jax.random.split(state.key, 3)
-        alpha = jnp.exp(state.log_alpha)
-
-        # critic: r + gamma (1 - terminal) (min_i Q'_i(s', a') - alpha log pi(a'|s')), a' ~ pi(s')
-        mean, log_std = self.actor.apply(state.actor, batch["next_observations"])
-        next_act, next_logp = sample_tanh_gaussian(k_next, mean, log_std)
-        next_q = self.critic.apply(state.target_critic, batch["next_observations"], next_act)
-        next_v = losses.soft_value(next_q, next_logp, alpha)
-        target = losses.td_target(batch["rewards"], batch["terminals"], next_v, cfg.gamma)
-
-        def critic_loss_fn(params):
-            q = self.critic.apply(params, batch["observations"], batch["actions"])
-            return losses.critic_regression_loss(q, target), q
-
-        (critic_loss, q), grads = jax.value_and_grad(critic_loss_fn, has_aux=True)(state.critic)
-        updates, critic_opt = self.opt.update(grads, state.critic_opt, state.critic)
-        critic = optax.apply_updates(state.critic, updates)
-
-        # actor: E[alpha log pi(a~|s) - min_i Q_i(s, a~)] with the updated critic
-        def actor_loss_fn(params):
-            mean, log_std = self.actor.apply(params, batch["observations"])
-            act, logp = sample_tanh_gaussian(k_pi, mean, log_std)
-            q_pi = self.critic.apply(critic, batch["observations"], act)
-            return losses.sac_actor_loss(q_pi, logp, alpha), logp
-
-        (actor_loss, logp), grads = jax.value_and_grad(actor_loss_fn, has_aux=True)(state.actor)
-        updates, actor_opt = self.opt.update(grads, state.actor_opt, state.actor)
-        actor = optax.apply_updates(state.actor, updates)
-
-        # temperature: -E[log_alpha (log pi + H_target)]
-        alpha_loss, grad = jax.value_and_grad(losses.temperature_loss)(state.log_alpha, logp, self.target_entropy)
-        updates, alpha_opt = self.opt.update(grad, state.alpha_opt, state.log_alpha)
-        log_alpha = optax.apply_updates(state.log_alpha, updates)
-
-        target_critic = optax.incremental_update(critic, state.target_critic, cfg.tau)
-        new = SACState(actor, critic, target_critic, log_alpha, actor_opt, critic_opt, alpha_opt, key)
-        info = {
-            "critic_loss": critic_loss,
-            "actor_loss": actor_loss,
-            "alpha": alpha,
-            "alpha_loss": alpha_loss,
-            "q_mean": jnp.mean(q),
-            "entropy": -jnp.mean(logp),
-        }
-        return new, info
-
-    def _update_and_act(self, state: SACState, batch: dict[str, jax.Array], obs: jax.Array):
-        """One update, then a stochastic action of the updated actor for `obs` (obs_dim,) -> (act_dim,)."""
-        state, info = self._update(state, batch)
-        key, k_act = jax.random.split(state.key)
-        mean, log_std = self.actor.apply(state.actor, obs)
-        action, _ = sample_tanh_gaussian(k_act, mean, log_std)
-        return state._replace(key=key), info, action
-
-
-@functools.lru_cache(maxsize=8)
-def make_sac(obs_dim: int, act_dim: int, cfg: SACConfig = SACConfig()) -> SAC:
-    """A shared `SAC` per (dims, config), so its jitted functions compile once per process."""
-    return SAC(obs_dim, act_dim, cfg)
 
 
 def train(
@@ -218,9 +109,9 @@ def train(
     state = sac.init(seed)
     rng = np.random.default_rng(seed)
     if resume:
-        state = flax.serialization.from_bytes(state, (out / "state.msgpack").read_bytes())
+        state = state_from_bytes(state, (out / "state.msgpack").read_bytes())
         rng.bit_generator.state = saved["rng"]
-        _reload_replay(out, buffer, start)
+        reload_replay(out, buffer, start)
 
     stop_reason = {"why": None}
 
@@ -262,12 +153,12 @@ def train(
             if bar is not None:
                 bar.update(1)
             if step % eval_every == 0 or step == steps or stop_reason["why"] or (out / "STOP").exists():
-                returns = evaluate(spec.name, state.actor, eval_episodes, seed=seed + step, hidden=cfg.hidden,
+                returns = evaluate(spec.name, state.actor.params, eval_episodes, seed=seed + step, hidden=cfg.hidden,
                                    max_episode_steps=max_episode_steps)
                 last_eval = float(returns.mean())
                 score = float(normalized_score(spec.name, last_eval))
                 ckpt = out / "checkpoints" / f"actor_{step:07d}.msgpack"
-                ckpt.write_bytes(flax.serialization.to_bytes(state.actor))
+                ckpt.write_bytes(flax.serialization.to_bytes(state.actor.params))
                 buffer.save_range(out / "replay" / f"{saved_upto:07d}_{step:07d}.npz", saved_upto, step)
                 saved_upto = step
                 _save_state(out, state, rng, step)
@@ -312,7 +203,7 @@ def train(
 
 def _save_state(out: Path, state: SACState, rng: np.random.Generator, step: int) -> None:
     """The whole training state after `step` env steps (atomic: a kill leaves the previous one)."""
-    atomic_write_bytes(out / "state.msgpack", flax.serialization.to_bytes(state))
+    atomic_write_bytes(out / "state.msgpack", state_to_bytes(state))
     atomic_write_text(out / "state.json", json.dumps({"step": step, "rng": rng.bit_generator.state}))
 
 
@@ -354,28 +245,11 @@ def _resume_info(out: Path) -> tuple[dict[str, Any], dict[str, Any], SACConfig]:
     if upto < start:
         raise FileNotFoundError(f"{out}/replay holds the first {upto} transitions, not the {start} the saved state "
                                 "needs")
+    try:
+        check_state_bytes((out / "state.msgpack").read_bytes())
+    except ValueError as e:
+        raise ValueError(f"{out}: {e}") from None
     return run, saved, cfg
-
-
-def _reload_replay(out: Path, buffer: ReplayBuffer, start: int) -> None:
-    """Refill `buffer` with the first `start` transitions; drop chunks from later steps; end the cut episode."""
-    for f in (out / "replay").glob("*.npz"):
-        if chunk_range(f)[0] >= start:
-            f.unlink()
-    if start == 0:
-        return
-    data = load_replay(out, upto=start)
-    for k, v in data.items():
-        buffer.data[k][:start] = v
-    buffer.size = start
-    if not (buffer.data["terminals"][start - 1] or buffer.data["timeouts"][start - 1]):
-        buffer.data["timeouts"][start - 1] = 1.0  # the interrupted episode ends here; rewrite its chunk
-        last = max((out / "replay").glob("*.npz"), key=lambda f: chunk_range(f)[1])
-        lo, hi = chunk_range(last)
-        if hi > start:  # the last chunk runs past the saved state: cut it there
-            last.unlink()
-            last = out / "replay" / f"{lo:07d}_{start:07d}.npz"
-        buffer.save_range(last, lo, start)
 
 
 def main(argv: list[str] | None = None) -> int:
