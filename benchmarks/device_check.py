@@ -71,7 +71,8 @@ def main_job(timeout_s: float) -> dict:
 def main(argv: list[str] | None = None) -> dict:
     p = OneLineParser(prog="python -m benchmarks.device_check", description=__doc__.split("\n\n")[0],
                       formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--members", nargs="+", type=positive_int, default=[1, 8, 64, 256])
+    p.add_argument("--members", nargs="+", type=positive_int, default=[1, 8, 64, 256],
+                   help="member-axis sizes to time, one case each per algorithm (default: 1 8 64 256)")
     p.add_argument("--transitions", type=positive_int, default=1_000_000, help="rows of the synthetic dataset")
     p.add_argument("--matmul-n", type=positive_int, default=8192, help="side of the matmul timed for the peak")
     p.add_argument("--no-main-job", action="store_true", help="skip the main job end to end")

@@ -152,9 +152,9 @@ def run(layer_norm=True, fused=False, seeds=1, mode="single", calls=200, reps=5)
 
 def main(argv=None) -> float:
     p = OneLineParser(prog="benchmarks.handwritten", description=__doc__.split("\n\n")[0])
-    p.add_argument("--no-layer-norm", action="store_true")
+    p.add_argument("--no-layer-norm", action="store_true", help="networks without LayerNorm (default: with)")
     p.add_argument("--fused-ln", action="store_true", help="LayerNorm+ReLU with a hand-written VJP")
-    p.add_argument("--seeds", type=positive_int, default=1)
+    p.add_argument("--seeds", type=positive_int, default=1, help="seeds trained at once (default %(default)s)")
     p.add_argument("--mode", choices=("single", "vmap", "unrolled"), default=None,
                    help="default: single for 1 seed, vmap otherwise")
     p.add_argument("--calls", type=positive_int, default=200, help="update calls per timed chunk")

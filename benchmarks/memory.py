@@ -49,7 +49,8 @@ def child(algo: str, seeds: int, transitions: int) -> dict:
 def main(argv=None) -> int:
     p = OneLineParser(prog="benchmarks.memory", description=__doc__,
                       formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--algos", nargs="+", default=["td3bc", "edac"], choices=["td3bc", "edac", "td3bc_cql", "edac_bc"])
+    p.add_argument("--algos", nargs="+", default=["td3bc", "edac"], choices=["td3bc", "edac", "td3bc_cql", "edac_bc"],
+                   help="algorithms to measure, one case per seed count each (default: td3bc edac)")
     p.add_argument("--seeds", nargs="+", type=positive_int, default=[1, 8], help="seed counts (default 1 8)")
     p.add_argument("--transitions", type=positive_int, default=1_000_000, help="rows of the synthetic dataset")
     p.add_argument("--json", action="store_true", help="one JSON object per case on stdout")

@@ -100,7 +100,8 @@ def run_case(case: str, args) -> float:
 def main(argv: list[str] | None = None) -> None:
     p = OneLineParser(prog="python -m benchmarks.parallel", description=__doc__,
                       formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--cases", nargs="+", choices=CASES, default=list(CASES))
+    p.add_argument("--cases", nargs="+", choices=CASES, default=list(CASES),
+                   help="which cases to run, as listed above (default: all)")
     p.add_argument("--variants", type=positive_int, default=2, help="variants trained at once")
     p.add_argument("--seeds", type=positive_int, default=3, help="seeds per variant, on its member axis")
     p.add_argument("--calls", type=positive_int, default=250, help="update calls (2 updates each) per timed chunk")

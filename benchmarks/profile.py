@@ -176,7 +176,8 @@ def table(result: dict) -> str:
 def main(argv=None) -> int:
     p = OneLineParser(prog="python -m benchmarks.profile", description=__doc__.split("\n\n")[0],
                       formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--algo", choices=("td3bc", "edac"), default="td3bc")
+    p.add_argument("--algo", choices=("td3bc", "edac"), default="td3bc",
+                   help="algorithm whose offline-RL update is traced (default %(default)s)")
     p.add_argument("--num-critics", type=positive_int, default=10, help="EDAC's ensemble size (default 10)")
     p.add_argument("--updates", type=positive_int, default=1000, help="updates in the traced chunk (default 1000)")
     p.add_argument("--transitions", type=positive_int, default=100_000, help="rows of the synthetic dataset")

@@ -86,8 +86,9 @@ def compare(algos: list[str], rounds: int) -> None:
 
 def main(argv: list[str] | None = None) -> None:
     p = OneLineParser(prog="benchmarks.pytorch", description=__doc__.split("\n\n")[0])
-    p.add_argument("--algo", nargs="+", default=["td3bc", "edac"], choices=["td3bc", "edac"])
-    p.add_argument("--json", action="store_true")
+    p.add_argument("--algo", nargs="+", default=["td3bc", "edac"], choices=["td3bc", "edac"],
+                   help="algorithms to time (default: td3bc edac)")
+    p.add_argument("--json", action="store_true", help="one JSON object per algorithm instead of a line of text")
     p.add_argument("--reps", type=positive_int, default=3,
                    help="timed rounds, median reported (default %(default)s)")
     p.add_argument("--compare", action="store_true", help="interleave JAX and PyTorch timings; print the ratio")

@@ -94,8 +94,11 @@ def run_case(case: str, seeds: int, updates: int, chunks: int, members: str | No
 def main(argv=None) -> int:
     p = OneLineParser(prog="python -m benchmarks.scaling", description=__doc__.split("\n\n")[0],
                       epilog="cases: " + ", ".join(CASES))
-    p.add_argument("--seeds", type=positive_int, nargs="+", default=[1, 2, 4, 8])
-    p.add_argument("--cases", nargs="+", choices=CASES, default=list(CASES))
+    p.add_argument("--seeds", type=positive_int, nargs="+", default=[1, 2, 4, 8],
+                   help="seed counts S to time, each in every case (default: 1 2 4 8)")
+    p.add_argument("--cases", nargs="+", choices=CASES, default=list(CASES),
+                   help="which cases to run (default: all): 1core, one pinned process; default, XLA's own threads; "
+                        "2devices, two host devices; 2processes, two pinned processes joined by jax.distributed")
     p.add_argument("--updates", type=positive_int, default=300, help="updates per timed chunk (default %(default)s)")
     p.add_argument("--chunks", type=positive_int, default=3,
                    help="timed chunks after the warm-up (default %(default)s)")

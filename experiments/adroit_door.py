@@ -18,6 +18,7 @@ from offrl_jax.algos import PRESETS, preset_values
 from offrl_jax.app.command import run_command
 from offrl_jax.app.flags import run_args
 from offrl_jax.app.studies import study_fields
+from offrl_jax.losses import BALANCES
 from offrl_jax.run.study import Study, Variant
 from offrl_jax.system.cli import OneLineParser, number, positive_int
 
@@ -56,14 +57,16 @@ def build(args) -> Study:
 def make_parser() -> argparse.ArgumentParser:
     p = OneLineParser(prog="experiments.adroit_door", description=__doc__,
                       formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--dataset", choices=("door-human", "door-cloned"), default="door-human")
-    p.add_argument("--variants", nargs="+", choices=tuple(VARIANTS), default=list(VARIANTS))
+    p.add_argument("--dataset", choices=("door-human", "door-cloned"), default="door-human",
+                   help="the Adroit door dataset (default %(default)s); --dataset-path reads it from a file instead")
+    p.add_argument("--variants", nargs="+", choices=tuple(VARIANTS), default=list(VARIANTS),
+                   help="the algorithms to compare, one variant each (default: all eight)")
     p.add_argument("--scale", type=number(0, 10, low_open=True), default=0.1,
                    help="fraction of the paper's update counts, in (0, 10] (default 0.1)")
     p.add_argument("--num-critics", type=positive_int, default=None, help="EDAC(+BC) ensemble size (paper: 50)")
     p.add_argument("--alpha", type=number(0), default=None,
                    help="TD3+BC(+CQL) alpha (default: the paper's 0.1; the authors' door config: 1.0)")
-    p.add_argument("--balance", choices=("abs", "signed"), default=None,
+    p.add_argument("--balance", choices=BALANCES, default=None,
                    help="the hybrids' loss balancing: x/sg|x| (abs, default) or the authors' x/sg(x) (signed)")
     p.add_argument("--preset", choices=tuple(PRESETS), default=None,
                    help="authors: the authors' code switch by switch (docs/fidelity.md)")

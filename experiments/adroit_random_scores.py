@@ -50,9 +50,11 @@ def main(argv=None) -> int:
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--episodes", type=int_at_least(2, 1_000_000), default=100,
                     help="episodes per env (2 to 1e6: 2 for a standard error; default %(default)s)")
-    ap.add_argument("--envs", nargs="+", choices=tuple(PAPER_TABLE4), default=list(PAPER_TABLE4))
-    ap.add_argument("--seed", type=seed_int, default=0)
-    ap.add_argument("--out", type=Path, default=None)
+    ap.add_argument("--envs", nargs="+", choices=tuple(PAPER_TABLE4), default=list(PAPER_TABLE4),
+                    help="Adroit tasks, one row each (default: pen door hammer relocate)")
+    ap.add_argument("--seed", type=seed_int, default=0,
+                    help="seed of the random actions; episode i resets with seed + i (default %(default)s)")
+    ap.add_argument("--out", type=Path, default=None, help="also write scores.json and table.txt here")
     ap.add_argument("--overwrite", action="store_true", help="replace the files of an earlier run in --out")
     args = ap.parse_args(argv)
     refuse_existing(ap, args.out, args.overwrite, OUTPUTS)

@@ -52,7 +52,12 @@ def build(args):
 def make_parser():
     p = parser("experiments.figure2", __doc__, updates=30_000, eval_every=2_500, edac_pretrain=EDAC_PRETRAIN,
                omit=("env", "algo"), num_critics="10, EDAC only")
-    p.add_argument("--envs", nargs="+", choices=ENVS, default=list(ENVS))
+    p.add_argument("--envs", nargs="+", choices=ENVS, default=list(ENVS),
+                   help="MuJoCo tasks, one study per task and algorithm (default: hopper halfcheetah walker2d)")
+    for action in p._actions:  # build() gives ReBRAC 1024 when --batch-size is at its default
+        if action.dest == "batch_size":
+            action.help = (f"transitions per gradient update, per seed, drawn uniformly with replacement (default "
+                           f"{BATCH_SIZE}, which ReBRAC replaces with its own 1024)")
     p.add_argument("--algos", nargs="+", choices=("td3bc", "edac", "rebrac", "iql"), default=["td3bc", "edac"],
                    help="(default: td3bc edac, the paper's)")
     p.add_argument("--edac-updates", type=positive_int, default=16_000, help="EDAC's budget (default %(default)s)")

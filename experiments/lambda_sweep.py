@@ -25,7 +25,9 @@ def build(args):
 def make_parser():
     p = parser("experiments.lambda_sweep", __doc__, updates=20_000, eval_every=2_000, env="halfcheetah",
                omit=("pretrain", "lam"))
-    p.add_argument("--lambdas", type=float, nargs="+", default=[0.0, 0.1, 0.5, 1.0])
+    p.add_argument("--lambdas", type=float, nargs="+", default=[0.0, 0.1, 0.5, 1.0],
+                   help="TD weights of critic pre-training to compare, each in [0, 1] (0: pure MC), one pre-trained "
+                        "variant each, besides the one from scratch (default: 0 0.1 0.5 1)")
     return p
 
 

@@ -27,8 +27,12 @@ def build(args):
 
 
 def make_parser():
-    return parser("experiments.layernorm", __doc__, updates=20_000, eval_every=2_000, env=None,
-                  omit=("pretrain", "actor_layer_norm", "critic_layer_norm"))
+    p = parser("experiments.layernorm", __doc__, updates=20_000, eval_every=2_000, env=None,
+               omit=("pretrain", "actor_layer_norm", "critic_layer_norm"))
+    for action in p._actions:
+        if action.dest == "env":
+            action.help = "run on this MuJoCo task only (default: hopper and halfcheetah, one study each)"
+    return p
 
 
 def main(argv=None) -> int:

@@ -142,17 +142,22 @@ def _fmt(x: float | None) -> str:
 def main(argv=None) -> int:
     ap = OneLineParser(prog="experiments.theory", description=__doc__,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--mdps", type=positive_int, default=20)
-    ap.add_argument("--states", type=int_at_least(2, 10_000), default=50)
-    ap.add_argument("--actions", type=int_at_least(2, 1_000), default=4)
-    ap.add_argument("--gamma", type=number(0, 1, low_open=True, high_open=True), default=0.99)
+    ap.add_argument("--mdps", type=positive_int, default=20,
+                    help="random MDPs per (eps, beta) row, averaged (default %(default)s)")
+    ap.add_argument("--states", type=int_at_least(2, 10_000), default=50,
+                    help="states per MDP, 2 to 10000 (default %(default)s)")
+    ap.add_argument("--actions", type=int_at_least(2, 1_000), default=4,
+                    help="actions per state, 2 to 1000 (default %(default)s)")
+    ap.add_argument("--gamma", type=number(0, 1, low_open=True, high_open=True), default=0.99,
+                    help="discount factor, in (0, 1) (default %(default)s)")
     ap.add_argument("--eps", type=number(0), nargs="+", default=[0.0, 0.01],
                     help="approximation errors per iteration (>= 0)")
     ap.add_argument("--betas", type=number(0, 1), nargs="+", default=[0.0, 0.5, 0.8, 0.9, 0.95, 0.99],
                     help="behaviour policies beta*greedy + (1-beta)*uniform (in [0, 1])")
     ap.add_argument("--delta", type=number(0, 1, low_open=True, high_open=True), default=1e-3,
                     help="target error as a fraction of ||Q*||, in (0, 1)")
-    ap.add_argument("--seed", type=seed_int, default=0)
+    ap.add_argument("--seed", type=seed_int, default=0,
+                    help="seed of the random MDPs (the noise e_k of MDP m is seeded with m) (default %(default)s)")
     ap.add_argument("--out", type=Path, default=None, help="write rows.json, summary.json and theory.png here")
     ap.add_argument("--overwrite", action="store_true", help="replace the files of an earlier run in --out")
     ap.add_argument("--json", action="store_true", help="print the summary as JSON")

@@ -12,7 +12,8 @@ line in a config class: it reaches the command line, `config.json` and the losse
     tuple[int, ...]           one or more widths
     tuple[float, float]       two numbers
     Literal[...]              one of the choices
-    str                       a string (the config checks it)
+    str                       one of `CHOICES[field]`, the tuple the config's own check uses; a field not there is a
+                              string the config checks
 
 Every flag defaults to None, which means "not given": the per-env default or the config's own then applies.
 `ALIASES` keeps the short names the studies had before (`--actor-ln`, `--ln-affine`, ...).
@@ -29,6 +30,9 @@ from pathlib import Path
 from typing import Any
 
 from offrl_jax.algos import FAMILIES
+from offrl_jax.algos.config import TIMEOUTS
+from offrl_jax.losses import BALANCES
+from offrl_jax.nets import INITS, TANH_LOG_DETS
 from offrl_jax.run.loggers import LOGGERS
 from offrl_jax.run.study import MAX_MEMBERS
 from offrl_jax.system.cli import int_at_least, integer, number, positive_int, seed_int
@@ -38,6 +42,8 @@ CONFIGS = tuple(family.config for family in FAMILIES.values())
 NOT_FLAGS = frozenset({"pretrain", "pretrain_updates", "pretrain_auto", "bc_only"})
 # the fields that have a flag (`add_config_flags` leaves out a study's `omit` too)
 FLAG_FIELDS = frozenset(f.name for cls in CONFIGS for f in dataclasses.fields(cls)) - NOT_FLAGS
+# the accepted values of the str fields, the same tuples their configs' __post_init__ checks use
+CHOICES = {"init": INITS, "timeouts": TIMEOUTS, "balance": BALANCES, "tanh_log_det": TANH_LOG_DETS}
 ALIASES = {"actor_layer_norm": ("--actor-ln",), "critic_layer_norm": ("--critic-ln",),
            "layer_norm_affine": ("--ln-affine",)}
 
@@ -83,8 +89,10 @@ def _fields(configs: tuple[type, ...] = CONFIGS) -> dict[str, dict[str, Any]]:
     return found
 
 
-def _argument(annotation: Any, sweepable: bool) -> dict[str, Any]:
-    """argparse keywords for a field's annotation."""
+def _argument(name: str, annotation: Any, sweepable: bool) -> dict[str, Any]:
+    """argparse keywords for a field's annotation (and, for a str field, its `CHOICES`)."""
+    if name in CHOICES:
+        return {"choices": CHOICES[name]}
     args = typing.get_args(annotation)
     if typing.get_origin(annotation) in (typing.Union, types.UnionType):  # X | None
         annotation = next(a for a in args if a is not type(None))
@@ -119,7 +127,7 @@ def add_config_flags(parser: argparse.ArgumentParser, omit: typing.Iterable[str]
         if entry["sweepable"]:
             text += "; several values = a sweep, vmapped in one program"
         group.add_argument(f"--{name.replace('_', '-')}", *ALIASES.get(name, ()), dest=name, default=None,
-                           help=text.replace("%", "%%"), **_argument(entry["type"], entry["sweepable"]))
+                           help=text.replace("%", "%%"), **_argument(name, entry["type"], entry["sweepable"]))
         dests.append(name)
     return tuple(dests)
 
@@ -192,7 +200,9 @@ def run_args(parser: argparse.ArgumentParser, updates: int | None, eval_every: i
                        help="updates between evaluations (default %(default)s)")
     g.add_argument("--eval-episodes", type=positive_int, default=eval_episodes,
                    help="episodes per evaluation per seed (default %(default)s)")
-    g.add_argument("--batch-size", type=positive_int, default=BATCH_SIZE)
+    g.add_argument("--batch-size", type=positive_int, default=BATCH_SIZE,
+                   help="transitions per gradient update, per seed, drawn uniformly with replacement "
+                        "(default %(default)s)")
     g.add_argument("--checkpoint-every", type=int_at_least(0), default=0,
                    help="updates between checkpoints (0: every evaluation)")
     g.add_argument("--keep-checkpoints", type=int_at_least(0, 2**31 - 1), default=0,
@@ -231,8 +241,10 @@ def run_args(parser: argparse.ArgumentParser, updates: int | None, eval_every: i
                         "Open MPI); needs --out or --resume")
     m.add_argument("--coordinator", type=host_port, default=None, metavar="HOST:PORT",
                    help="or set the processes by hand: process 0's address, with --num-processes and --process-id")
-    m.add_argument("--num-processes", type=positive_int, default=None)
-    m.add_argument("--process-id", type=int_at_least(0), default=None)
+    m.add_argument("--num-processes", type=positive_int, default=None,
+                   help="with --coordinator: how many processes the run has in all, on every host")
+    m.add_argument("--process-id", type=int_at_least(0), default=None,
+                   help="with --coordinator: this process's index, 0 to --num-processes - 1 (0 writes the run)")
     g.add_argument("--logger", choices=LOGGERS, default=None,
                    help="also send every evaluation's scores and metrics to TensorBoard (RUN/tensorboard/) or "
                         "Weights & Biases; curves.csv stays the record (pip install -e \".[tensorboard]\" or "

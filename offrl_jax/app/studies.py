@@ -40,7 +40,8 @@ def parser(prog: str, doc: str, updates: int = 100_000,
         if flag[2:].replace("-", "_") not in omit:
             group.add_argument(flag, **kw)
 
-    add("--env", choices=ENVS, default=env)
+    add("--env", choices=ENVS, default=env,
+        help="MuJoCo task: trains on <env>-<level> (or --dataset-path) and evaluates there (default %(default)s)")
     add("--level", choices=LEVELS, default="medium", help="dataset level (default %(default)s)")
     add("--algo", choices=tuple(ALGOS), default="td3bc", help="(default %(default)s)")
     add("--pretrain", nargs="+", choices=PRETRAIN, default=["actor+critic", "none"],

@@ -268,7 +268,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--warmup", type=int_at_least(0), default=None,
                    help=f"uniform-random steps before the first update (default {SACConfig.warmup_steps})")
     p.add_argument("--stop-score", type=number(), default=None, help="stop once the normalised eval score reaches this")
-    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar (for batch logs)")
     a = p.parse_args(argv)
     settings = {"--env": a.env, "--out": a.out, "--seed": a.seed, "--eval-every": a.eval_every,
                 "--eval-episodes": a.eval_episodes, "--warmup": a.warmup}

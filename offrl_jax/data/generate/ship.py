@@ -159,7 +159,8 @@ def main(argv: list[str] | None = None) -> int:
     p = OneLineParser(prog="offrl_jax.data.generate.ship", description=__doc__,
                       formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--run", type=Path, required=True, help="SAC run directory")
-    p.add_argument("--level", required=True, choices=["medium", "expert"])
+    p.add_argument("--level", required=True, choices=["medium", "expert"],
+                   help="which behaviour policy to choose and ship (the rules above)")
     p.add_argument("--step", type=positive_int, default=None,
                    help="ship this checkpoint instead of the automatic choice")
     p.add_argument("--episodes", type=positive_int, default=20, help="verification episodes")

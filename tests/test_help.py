@@ -1,0 +1,110 @@
+"""Every entry point's --help says what each of its flags does: every argument of every command's parser (and of its
+sub-commands) has a help text, and the config fields that take one of a few strings offer exactly the values their
+config accepts.  The parsers are built in this process (`make_parser()`, or `main` stopped at its first parse), no
+command is run."""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import importlib
+import re
+import typing
+from pathlib import Path
+
+import pytest
+
+from offrl_jax.app import flags
+
+ROOT = Path(__file__).resolve().parents[1]
+# a package's __main__.py: the module whose `main` it runs
+PACKAGE_MAINS = {"offrl_jax.data": "offrl_jax.data.catalogue"}
+
+
+def entry_points() -> list[str]:
+    """Every module with an `if __name__ == "__main__":` block, and every package's `__main__.py` (as its module)."""
+    found = []
+    for folder in ("offrl_jax", "experiments", "benchmarks"):
+        for path in sorted((ROOT / folder).rglob("*.py")):
+            if path.name == "__main__.py":
+                found.append(".".join(path.relative_to(ROOT).parent.parts))
+            elif re.search(r'^if __name__ == "__main__":', path.read_text(), re.MULTILINE):
+                found.append(".".join(path.relative_to(ROOT).with_suffix("").parts))
+    return found
+
+
+class Parsed(Exception):
+    """Raised by the first parse of a command's `main`, carrying its parser."""
+
+
+def command_parser(module_name: str, monkeypatch) -> argparse.ArgumentParser:
+    """The parser a command builds: its `make_parser()`, or the one its `main` parses with (stopped right there)."""
+    module = importlib.import_module(PACKAGE_MAINS.get(module_name, module_name))
+    if hasattr(module, "make_parser"):
+        return module.make_parser()
+
+    def stop(self, args=None, namespace=None):
+        raise Parsed(self)
+
+    monkeypatch.setattr(argparse.ArgumentParser, "parse_known_args", stop)
+    with pytest.raises(Parsed) as parsed:
+        module.main(["--help"])
+    return parsed.value.args[0]
+
+
+def undocumented(parser: argparse.ArgumentParser) -> list[str]:
+    """The arguments of `parser` and its sub-commands shown in --help without a help text."""
+    missing = []
+    for action in parser._actions:
+        if isinstance(action, argparse._HelpAction):
+            continue
+        name = f"{parser.prog} {'/'.join(action.option_strings) or action.dest}"
+        if isinstance(action, argparse._SubParsersAction):
+            missing += [f"{parser.prog} {choice.dest}" for choice in action._choices_actions
+                        if not (choice.help or "").strip()]
+            for sub in action.choices.values():
+                missing += undocumented(sub)
+        elif not (action.help or "").strip():
+            missing.append(name)
+    return missing
+
+
+def test_entry_points_are_found():
+    found = set(entry_points())
+    assert {"experiments.mujoco_medium", "experiments.theory", "offrl_jax.data", "offrl_jax.rollout",
+            "benchmarks.throughput"} <= found
+    assert {m for m in found if (ROOT / m.replace(".", "/") / "__main__.py").is_file()} == set(PACKAGE_MAINS)
+
+
+@pytest.mark.parametrize("module", entry_points())
+def test_every_flag_has_help(module, monkeypatch):
+    if module == "benchmarks.pytorch":
+        pytest.importorskip("torch")
+    assert not undocumented(command_parser(module, monkeypatch))
+
+
+def _str_fields() -> dict[str, list[type]]:
+    """{str-typed config field: the configs that have it}."""
+    fields: dict[str, list[type]] = {}
+    for cls in flags.CONFIGS:
+        for name, hint in typing.get_type_hints(cls).items():
+            text = hint is str or set(typing.get_args(hint)) == {str, type(None)}  # str, or str | None
+            if text and name in {f.name for f in dataclasses.fields(cls)}:
+                fields.setdefault(name, []).append(cls)
+    return fields
+
+
+def test_string_config_flags_offer_what_the_config_accepts():
+    """Each str field's flag has `choices`, each accepted by every config with that field, and a value outside them is
+    refused by the config as well as by the flag."""
+    fields = _str_fields()
+    assert set(fields) == set(flags.CHOICES)
+    parser = argparse.ArgumentParser()
+    flags.add_config_flags(parser)
+    by_dest = {action.dest: action for action in parser._actions}
+    for name, classes in fields.items():
+        assert tuple(by_dest[name].choices) == tuple(flags.CHOICES[name])
+        for cls in classes:
+            for value in flags.CHOICES[name]:
+                cls(**{name: value})
+            with pytest.raises(ValueError, match=name):
+                cls(**{name: "not-a-choice"})
