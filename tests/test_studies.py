@@ -177,7 +177,7 @@ def test_a_failing_parallel_variant_stops_the_others_at_once(tmp_path, monkeypat
     from offrl_jax.run.runner import Stopped, run_study
     from offrl_jax.run.study import Study, Variant
 
-    def fake_group(study, group, swept, ds, data_sha256, out_dir, resume, bar, recorder):
+    def fake_group(study, group, swept, ds, data_sha256, out_dir, resume, bar, recorder, data=None):
         if group[0].label == "slow":
             deadline = time.monotonic() + 60
             while not recorder.stop.is_set() and time.monotonic() < deadline:
