@@ -155,6 +155,11 @@ def main(argv=None) -> int:
             raise ValueError(f"{twice} is given twice (a study counts once)")
         if args.overlay and args.plot is None:
             raise ValueError("--overlay draws into the figure of --plot FIG.png; give --plot too")
+        if args.aggregate is not None:  # before any table is printed
+            if args.merge:
+                raise ValueError("--aggregate takes two or more studies (--merge makes one)")
+            if sum(len(summaries(d)) for d in args.dirs) < 2:
+                raise ValueError("--aggregate takes two or more studies")
         for flag, fig in (("--plot", args.plot), ("--aggregate", args.aggregate)):
             if fig is not None:
                 if fig.suffix.lower() != ".png":
@@ -192,8 +197,6 @@ def main(argv=None) -> int:
             if arms(found):
                 print(aggregate_table(aggregate(found)) + "\n")
         if args.aggregate is not None:
-            if len(found) < 2:
-                raise ValueError("--aggregate takes two or more studies")
             written = plot_aggregate(found, [read_curves(d / "curves.csv") for d in study_dirs], args.aggregate)
             print(f"aggregate figure: {', '.join(map(str, written))}", file=sys.stderr)
         if args.plot is not None:

@@ -74,6 +74,28 @@ def test_a_batch_larger_than_the_dataset_is_refused_before_anything_is_written(t
     assert not out.exists()
 
 
+@pytest.mark.parametrize("episode_len, batch, algo, left", [
+    (1, "256", ["--algo", "rebrac"], "0 of its 3,000 transitions remain"),  # every row a time-out
+    (1, "256", ["--timeouts", "drop"], "0 of its 3,000 transitions remain"),
+    (2, "2000", ["--algo", "rebrac"], "1,500 of its 3,000 transitions remain"),  # fewer left than a batch
+])
+def test_a_batch_larger_than_the_rows_left_after_dropping_time_outs_is_refused(tmp_path, episode_len, batch, algo,
+                                                                              left):
+    ds = synthetic_dataset(3000, episode_len=episode_len)
+    path = tmp_path / "hopper-short.hdf5"
+    with h5py.File(path, "w") as f:
+        for key in ("observations", "actions", "rewards", "next_observations", "terminals", "timeouts"):
+            f[key] = getattr(ds, key)
+    out = tmp_path / "out"
+    result = cli("--dataset-path", path, "--out", out, *algo, "--batch-size", batch, "--updates", "400",
+                 "--pretrain-updates", "200", "--eval-every", "100", timeout=120)
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 2 and "Traceback" not in result.stderr, result.stderr
+    assert lines[-1].startswith(f"error: {path}: {left} once its time-out rows are dropped"), lines[-1]
+    assert f"fewer than --batch-size {batch}; keep them with --timeouts bootstrap or stop" in lines[-1]
+    assert not out.exists()
+
+
 def test_existing_output_is_never_overwritten(tmp_path, tiny_hdf5):
     out = tmp_path / "run"
     out.mkdir()

@@ -69,6 +69,19 @@ def test_report_replaces_no_figure_and_counts_a_study_once(tmp_path, capsys):
     assert (tmp_path / "mine.png").read_bytes()[:4] == b"\x89PNG"
 
 
+def test_report_refuses_an_aggregate_of_one_study_before_any_table(tmp_path, capsys):
+    """--aggregate of one study (or of a --merge, which makes one) is refused before a table is printed."""
+    from experiments import report
+
+    figure = tmp_path / "agg.png"
+    for args in ([str(RUNS[0])], [str(RUNS[0]), str(RUNS[1]), "--merge", str(tmp_path / "merged")]):
+        assert report.main([*args, "--aggregate", str(figure), "--no-reference"]) == 2
+        out, err = capsys.readouterr()
+        assert out == "" and err.startswith("error: --aggregate takes two or more studies"), (out, err)
+        assert len(err.strip().splitlines()) == 1
+    assert not any(tmp_path.iterdir())
+
+
 def test_a_runs_curves_title_says_what_its_band_is_and_one_seed_has_none():
     from offrl_jax.run.results import curves_title
     assert (curves_title("hm-td3bc", "hopper-medium", 5)

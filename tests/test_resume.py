@@ -112,6 +112,22 @@ def test_an_unreadable_checkpoint_is_one_line(half_run, tmp_path):
         run_study(tiny_study(), run, synthetic_dataset(), resume=True, progress=False)
 
 
+@pytest.mark.parametrize("given", ["config.json", "stray.txt"])
+def test_resume_of_a_file_asks_for_the_run_directory(half_run, tmp_path, given):
+    from tests.entry import run_module
+
+    run = resumed_copy(half_run, tmp_path)
+    path = run / given if given == "config.json" else tmp_path / given
+    path.touch()
+    before = digest(tmp_path)
+    result = run_module("experiments.mujoco_medium", "--resume", path, "--no-progress")
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 2 and "Traceback" not in result.stderr and len(lines) == 1, result.stderr
+    mean = f": did you mean {run}?" if given == "config.json" else ""
+    assert lines[0] == f"error: --resume takes a run directory, not a file{mean}"
+    assert digest(tmp_path) == before
+
+
 def without_seconds(curves: Path) -> list[list[str]]:
     return [line.split(",")[:5] + line.split(",")[6:] for line in curves.read_text().splitlines()]
 

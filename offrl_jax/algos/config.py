@@ -103,6 +103,7 @@ def require(cfg: Any, checks: list[tuple[str, bool, str]]) -> None:
 def check_cql_fields(cfg: Any) -> None:
     """The uniform-action CQL penalty's and the loss balancing's fields, which both families have."""
     require(cfg, [("cql_actions", cfg.cql_actions >= 1, "must be >= 1"),
+                  ("cql_temperature", cfg.cql_temperature > 0, "must be positive"),
                   ("balance", cfg.balance in BALANCES, f"must be one of {', '.join(BALANCES)}")])
 
 

@@ -66,6 +66,8 @@ class ReBRACConfig(Config):
         require(self, [
             ("actor_beta", self.actor_beta >= 0, "must be >= 0"),
             ("critic_beta", self.critic_beta >= 0, "must be >= 0"),
+            ("policy_noise", self.policy_noise >= 0, "must be >= 0"),
+            ("noise_clip", self.noise_clip >= 0, "must be >= 0"),
             ("policy_delay", self.policy_delay >= 1, "must be >= 1"),
             ("pretrain_auto_window", not self.pretrain_auto or self.pretrain_auto_window % self.policy_delay == 0,
              f"must be a multiple of policy_delay ({self.policy_delay})"),

@@ -34,7 +34,7 @@ from offrl_jax.algos.common import (
     split_budget,
     uniform_actions,
 )
-from offrl_jax.algos.config import Config, check_cql_fields
+from offrl_jax.algos.config import Config, check_cql_fields, require
 from offrl_jax.data.returns import soft_returns_to_go
 from offrl_jax.nets import (
     TANH_LOG_DETS,
@@ -94,6 +94,10 @@ class SACNConfig(Config):
                              f"{', '.join(TANH_LOG_DETS)}")
         if not self.log_alpha_bound >= 0:
             raise ValueError(f"SACNConfig.log_alpha_bound = {self.log_alpha_bound} must be >= 0")
+        require(self, [
+            ("bc_weight", self.bc_weight >= 0, "must be >= 0 (0 = off)"),
+            ("cql_alpha", self.cql_alpha >= 0, "must be >= 0 (0 = off)"),
+        ])
 
 
 @struct.dataclass

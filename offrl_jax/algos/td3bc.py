@@ -34,7 +34,7 @@ from offrl_jax.algos.common import (
     single,
     uniform_actions,
 )
-from offrl_jax.algos.config import Config, check_cql_fields
+from offrl_jax.algos.config import Config, check_cql_fields, require
 from offrl_jax.nets import CriticEnsemble, DeterministicActor
 
 
@@ -71,6 +71,11 @@ class TD3BCConfig(Config):
             raise ValueError(f"TD3BCConfig.alpha = {self.alpha} must be >= 0")
         if not self.q_scale_eps >= 0:
             raise ValueError(f"TD3BCConfig.q_scale_eps = {self.q_scale_eps} must be >= 0")
+        require(self, [
+            ("policy_noise", self.policy_noise >= 0, "must be >= 0"),
+            ("noise_clip", self.noise_clip >= 0, "must be >= 0"),
+            ("cql_weight", self.cql_weight >= 0, "must be >= 0 (0 = off)"),
+        ])
         if self.bc_only and (self.pretrain != "actor" or self.pretrain_auto):
             what = f"pretrain = {self.pretrain!r}" if self.pretrain != "actor" else "pretrain_auto = True"
             raise ValueError(f"TD3BCConfig.{what} has no effect on the BC baseline (bc_only: every update is a BC "

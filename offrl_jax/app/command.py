@@ -25,8 +25,10 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
+
 from offrl_jax.app.launch import check_backend, start_local_processes, start_processes, use_cpu_cores
-from offrl_jax.app.outputs import output_dir, saved_studies, studies_json
+from offrl_jax.app.outputs import check_resume_dir, output_dir, saved_studies, studies_json
 from offrl_jax.data import catalogue
 from offrl_jax.data.dataset import DatasetError
 from offrl_jax.run.provenance import fingerprint
@@ -143,8 +145,8 @@ class Command:
         if self.resuming and args.config is not None:
             raise UsageError("--resume and --config exclude each other: --resume continues a run in place, "
                              "--config starts a new one from its settings")
-        if self.resuming and not (args.resume / "config.json").is_file():
-            raise UsageError(f"{args.resume}: nothing to resume (no config.json)")
+        if self.resuming:
+            check_resume_dir(args.resume)
         if self.resuming and given - RESUME_FLAGS:
             raise UsageError(f"--resume continues {args.resume} with its saved settings, so "
                              f"{_flags(parser, given - RESUME_FLAGS)} cannot change (only --updates, to extend it); "
@@ -205,6 +207,14 @@ class Command:
             if study.batch_size > len(ds):
                 raise UsageError(f"--batch-size {study.batch_size} is larger than the dataset ({len(ds):,} "
                                  f"transitions of {study.dataset})")
+            # timeouts = "drop": time-out rows are never sampled (`offrl_jax.driver.Driver`), so only the others count
+            if any(study.config(v.label).timeouts == "drop" for v in study.variants):
+                rows = int(np.count_nonzero(ds.timeouts == 0))
+                if study.batch_size > rows:
+                    lower = ", or a smaller --batch-size" if rows else ""
+                    raise UsageError(f"{study.dataset}: {rows:,} of its {len(ds):,} transitions remain once its "
+                                     f"time-out rows are dropped (timeouts = 'drop'), fewer than --batch-size "
+                                     f"{study.batch_size}; keep them with --timeouts bootstrap or stop{lower}")
         return data
 
     # 5. check a resume: every study's checkpoints must be its own, before anything is written

@@ -22,8 +22,7 @@ def output_dir(args, study_name: str) -> tuple[Path, bool]:
     """(directory, whether an earlier run in it is to be replaced); nothing is deleted here.  The default
     runs/<study>/<timestamp>[-n] is claimed at once (created empty), so runs started in the same second differ."""
     if args.resume is not None:
-        if not (args.resume / "config.json").is_file():
-            raise UsageError(f"{args.resume}: nothing to resume (no config.json)")
+        check_resume_dir(args.resume)
         return args.resume, False
     if args.out is None:
         stamp = Path("runs") / study_name / time.strftime("%Y%m%d-%H%M%S")
@@ -52,6 +51,16 @@ def output_dir(args, study_name: str) -> tuple[Path, bool]:
                              "a run does not write; --overwrite replaces only a run: move them or choose another --out")
         return args.out, True
     return args.out, False
+
+
+def check_resume_dir(path: Path) -> None:
+    """Raise one line unless `path` is a run directory (one with a config.json) that --resume can continue."""
+    if path.is_file():
+        run = path.parent
+        mean = f": did you mean {run}?" if (run / "config.json").is_file() else ""
+        raise UsageError(f"--resume takes a run directory, not a file{mean}")
+    if not (path / "config.json").is_file():
+        raise UsageError(f"{path}: nothing to resume (no config.json)")
 
 
 # what a run writes in its directory (offrl_jax/run/runner.py, offrl_jax/run/loggers.py, offrl_jax/system/checkpoint.py)
