@@ -36,6 +36,7 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
 
 from offrl_jax.algos.common import Phase, with_hparams
+from offrl_jax.data.dataset import rows_without_timeouts
 from offrl_jax.data.device import DATA_FIELDS
 from offrl_jax.system.distributed import to_host
 
@@ -232,7 +233,7 @@ class Driver:
         if getattr(algo, "uses_next_actions", False) and "next_actions" not in data:
             data = data | {"next_actions": next_actions(data["actions"], data["terminals"], data["timeouts"])}
         if getattr(algo.cfg, "timeouts", "bootstrap") == "drop":  # CORL's loader: time-out rows are never sampled
-            data = data | {"rows": jnp.asarray(np.flatnonzero(np.asarray(data["timeouts"]) == 0), jnp.int32)}
+            data = data | {"rows": jnp.asarray(rows_without_timeouts(data["timeouts"]), jnp.int32)}
         self.data = jax.device_put(data, self.layout.replicated)  # one copy per device, shared by its members
         self.hparams = None
         if sweep:

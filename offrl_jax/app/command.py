@@ -25,12 +25,10 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
-import numpy as np
-
 from offrl_jax.app.launch import check_backend, start_local_processes, start_processes, use_cpu_cores
 from offrl_jax.app.outputs import check_resume_dir, output_dir, saved_studies, studies_json
 from offrl_jax.data import catalogue
-from offrl_jax.data.dataset import DatasetError
+from offrl_jax.data.dataset import DatasetError, rows_without_timeouts
 from offrl_jax.run.provenance import fingerprint
 from offrl_jax.run.resume import check_resume, edited_resolved
 from offrl_jax.run.runner import Diverged, run_study
@@ -209,7 +207,7 @@ class Command:
                                  f"transitions of {study.dataset})")
             # timeouts = "drop": time-out rows are never sampled (`offrl_jax.driver.Driver`), so only the others count
             if any(study.config(v.label).timeouts == "drop" for v in study.variants):
-                rows = int(np.count_nonzero(ds.timeouts == 0))
+                rows = len(rows_without_timeouts(ds.timeouts))
                 if study.batch_size > rows:
                     lower = ", or a smaller --batch-size" if rows else ""
                     raise UsageError(f"{study.dataset}: {rows:,} of its {len(ds):,} transitions remain once its "

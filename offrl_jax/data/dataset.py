@@ -82,6 +82,12 @@ class Dataset:
         return dataclasses.replace(self, **arrays)
 
 
+def rows_without_timeouts(timeouts) -> np.ndarray:
+    """(K,) indices of the rows that are not time-outs: the only rows sampled when time-out rows are dropped
+    (`timeouts = "drop"`, as CORL's loader does)."""
+    return np.flatnonzero(np.asarray(timeouts) == 0)
+
+
 def normalize_obs(obs: np.ndarray, mean: np.ndarray, std: np.ndarray) -> np.ndarray:
     return (obs - mean) / std
 
