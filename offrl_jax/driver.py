@@ -233,7 +233,10 @@ class Driver:
         if getattr(algo, "uses_next_actions", False) and "next_actions" not in data:
             data = data | {"next_actions": next_actions(data["actions"], data["terminals"], data["timeouts"])}
         if getattr(algo.cfg, "timeouts", "bootstrap") == "drop":  # CORL's loader: time-out rows are never sampled
-            data = data | {"rows": jnp.asarray(rows_without_timeouts(data["timeouts"]), jnp.int32)}
+            rows = rows_without_timeouts(data["timeouts"])
+            if not len(rows):
+                raise ValueError("every transition is a time-out row: timeouts = 'drop' leaves nothing to sample")
+            data = data | {"rows": jnp.asarray(rows, jnp.int32)}
         self.data = jax.device_put(data, self.layout.replicated)  # one copy per device, shared by its members
         self.hparams = None
         if sweep:

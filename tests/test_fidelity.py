@@ -10,7 +10,7 @@ import pytest
 from offrl_jax import losses as L
 from offrl_jax.algos import PRESETS, make_algorithm, make_config
 from offrl_jax.algos.common import Phase, done_flags
-from offrl_jax.driver import make_chunk_fn
+from offrl_jax.driver import Driver, make_chunk_fn
 from offrl_jax.nets import MLP, Arch, sample_tanh_gaussian, tanh_gaussian_log_prob
 
 
@@ -63,6 +63,18 @@ def test_timeouts_drop_never_samples_a_timeout_row():
     fn = make_chunk_fn(Phase("probe", update, 100), batch_size=64, num_calls=100)
     _, metrics = fn(jnp.zeros((1,)), data, jax.random.split(jax.random.PRNGKey(0), 1), jnp.int32(0))
     assert float(metrics["timeout_rows"][0]) == 0 and float(metrics["rows_seen"][0]) == 0
+
+
+def test_a_driver_refuses_data_left_empty_by_dropping_time_outs():
+    """Called from Python, without the command's batch-size check: one line, not a gather on zero rows."""
+    from types import SimpleNamespace
+
+    n = 4
+    data = {k: jnp.zeros((n, 2)) for k in ("observations", "next_observations", "actions")}
+    data |= {k: jnp.zeros(n) for k in ("rewards", "terminals", "returns")} | {"timeouts": jnp.ones(n)}
+    algo = SimpleNamespace(cfg=SimpleNamespace(timeouts="drop"))
+    with pytest.raises(ValueError, match="every transition is a time-out row"):
+        Driver(algo, data, seeds=(0,), batch_size=2)
 
 
 def test_signed_balance_reverses_the_gradient_of_a_negative_term():
