@@ -1,1 +1,0 @@
-"""Stands in for D4RL (its import registers the datasets; gym.py serves ours)."""
