@@ -1,6 +1,7 @@
 """The authors' mode, switch by switch: every config field that reproduces a detail of the authors' code does what
 docs/fidelity.md says, and `--preset authors` sets them all."""
 import math
+from types import SimpleNamespace
 
 import jax
 import jax.numpy as jnp
@@ -67,8 +68,6 @@ def test_timeouts_drop_never_samples_a_timeout_row():
 
 def test_a_driver_refuses_data_left_empty_by_dropping_time_outs():
     """Called from Python, without the command's batch-size check: one line, not a gather on zero rows."""
-    from types import SimpleNamespace
-
     n = 4
     data = {k: jnp.zeros((n, 2)) for k in ("observations", "next_observations", "actions")}
     data |= {k: jnp.zeros(n) for k in ("rewards", "terminals", "returns")} | {"timeouts": jnp.ones(n)}

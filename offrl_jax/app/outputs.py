@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 
 from offrl_jax.run.study import Study, check_file_name
-from offrl_jax.system.cli import UsageError
+from offrl_jax.system.cli import UsageError, file_for_run_dir
 
 
 def output_dir(args, study_name: str) -> tuple[Path, bool]:
@@ -55,10 +55,8 @@ def output_dir(args, study_name: str) -> tuple[Path, bool]:
 
 def check_resume_dir(path: Path) -> None:
     """Raise one line unless `path` is a run directory (one with a config.json) that --resume can continue."""
-    if path.is_file():
-        run = path.parent
-        mean = f": did you mean {run}?" if (run / "config.json").is_file() else ""
-        raise UsageError(f"--resume takes a run directory, not a file{mean}")
+    if refusal := file_for_run_dir(path, "a run directory", "config.json"):
+        raise UsageError(refusal)
     if not (path / "config.json").is_file():
         raise UsageError(f"{path}: nothing to resume (no config.json)")
 

@@ -130,6 +130,15 @@ def number(low: float = -math.inf, high: float = math.inf, low_open: bool = Fals
     return convert
 
 
+def file_for_run_dir(path: Path, what: str, marker: str) -> str | None:
+    """The one-line refusal of a file given to --resume where `what` (a run directory) belongs, naming the file's
+    folder when that holds `marker`, a file such a run writes; None when `path` is not a file."""
+    if not path.is_file():
+        return None
+    mean = f": did you mean {path.parent}?" if (path.parent / marker).is_file() else ""
+    return f"--resume takes {what}, not a file{mean}"
+
+
 def check_writable_dir(path: Path) -> None:
     """Raise OSError (one line) unless `path` is, or can be made, a directory this process can write a file in.
     Tried for real (directories made, a temporary file written), then undone: nothing is left behind."""

@@ -49,6 +49,7 @@ from offrl_jax.system.checkpoint import atomic_write_bytes, atomic_write_text
 from offrl_jax.system.cli import (
     OneLineParser,
     check_writable_dir,
+    file_for_run_dir,
     int_at_least,
     lock_run_dir,
     number,
@@ -223,9 +224,8 @@ def check_new_run(out: Path) -> None:
 def _resume_info(out: Path) -> tuple[dict[str, Any], dict[str, Any], SACConfig]:
     """(run.json, state.json: {"step", "rng"}, config) of a run to resume; ValueError (one line) for a directory
     that holds no complete run to continue."""
-    if out.is_file():
-        mean = f": did you mean {out.parent}?" if (out.parent / "run.json").is_file() else ""
-        raise FileNotFoundError(f"--resume takes a SAC run directory, not a file{mean}")
+    if refusal := file_for_run_dir(out, "a SAC run directory", "run.json"):
+        raise FileNotFoundError(refusal)
     if not (out / "run.json").is_file() or not (out / "state.json").is_file():
         raise FileNotFoundError(f"{out}: nothing to resume (needs run.json and state.json from a run of this version)")
     try:
