@@ -42,6 +42,7 @@ from offrl_jax.data.generate.collect import (
     shipped_policies,
     summarize,
 )
+from offrl_jax.data.generate.reference import D4RL_V2
 from offrl_jax.envs.registry import get_env_spec
 from offrl_jax.system.cache import cache_dir
 from offrl_jax.system.checkpoint import atomic_write_text
@@ -51,12 +52,9 @@ LEVELS = ("random", "medium", "expert", "medium-expert", "medium-replay", "full-
 DATASET_NAMES = tuple(f"{e}-{lvl}" for e in GEN_ENVS for lvl in LEVELS)
 DEFAULT_TRANSITIONS = 1_000_000
 
-# D4RL v2 statistics for comparison (transitions, episodes, mean normalised behaviour score); None = not tabulated.
-D4RL_V2_STATS: dict[str, dict[str, float | None]] = {
-    "hopper-medium": {"transitions": 1_000_000, "episodes": 2186, "normalized_score": 44.0},
-    "halfcheetah-medium": {"transitions": 1_000_000, "episodes": 1000, "normalized_score": 40.0},
-    "walker2d-medium": {"transitions": 1_000_000, "episodes": 1191, "normalized_score": 62.0},
-}
+# D4RL v2 statistics for comparison (transitions, episodes, mean normalised behaviour score), from `reference`.
+D4RL_V2_STATS: dict[str, dict[str, float]] = {
+    name: {k: ref[k] for k in ("transitions", "episodes", "normalized_score")} for name, ref in D4RL_V2.items()}
 
 
 def parse_name(name: str) -> tuple[str, str]:

@@ -22,6 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from offrl_jax.data.dataset import Dataset
+from offrl_jax.data.generate.reference import D4RL_V2
 from offrl_jax.envs.registry import get_env_spec, make_env, normalized_score, warn_once_per_message
 from offrl_jax.nets import TanhGaussianActor, sample_tanh_gaussian
 
@@ -29,7 +30,8 @@ ACTOR_HIDDEN = (256, 256)
 POLICY_DIR = Path(__file__).resolve().parent.parent / "policies"
 POLICY_INDEX = POLICY_DIR / "policies.json"
 # D4RL's medium behaviour normalised scores: the shipped medium checkpoint is the one whose eval is closest to these.
-MEDIUM_TARGET_SCORE = {"hopper": 44.0, "halfcheetah": 40.0, "walker2d": 62.0}
+MEDIUM_TARGET_SCORE = {name.split("-")[0]: ref["normalized_score"] for name, ref in D4RL_V2.items()
+                       if name.endswith("-medium")}
 
 
 def actor_module(act_dim: int, hidden: tuple[int, ...] = ACTOR_HIDDEN) -> TanhGaussianActor:
