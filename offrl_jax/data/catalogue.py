@@ -21,7 +21,7 @@ import tempfile
 import warnings
 from pathlib import Path
 
-from offrl_jax.data.dataset import Dataset, DatasetError, dataset_dir
+from offrl_jax.data.dataset import DATASET_VERSIONS, Dataset, DatasetError, dataset_dir, is_current, split_version
 from offrl_jax.data.readers import FILE_SUFFIXES, load_dataset_path, minari_root, read_door_npz, read_minari
 from offrl_jax.envs.registry import get_env_spec, normalized_score
 from offrl_jax.system.cli import (
@@ -47,6 +47,9 @@ KNOWN: dict[str, str] = {
     "door-human": "shipped: 25 human demonstrations of Adroit door (6,729 transitions; DAPG, Apache-2.0)",
     "door-cloned": "generated: Adroit door, a behaviour-cloned policy mixed with the human demonstrations",
 }
+# the earlier versions of generated datasets whose making changed, each by its Minari id (docs/datasets.md)
+KNOWN |= {f"{name}-v{v}": f"{KNOWN[name]}; version {v}, made before version {current}"
+          for name, current in DATASET_VERSIONS.items() for v in range(current)}
 SHARED_NAMES = {"door-human": Path("data/adroit/door-human-demos.npz")}
 
 
@@ -150,8 +153,10 @@ def load(name_or_path, *, max_transitions: int | None = None, clip_actions: bool
     name = str(name_or_path)
     if not name.strip():
         raise DatasetError(f"{name_or_path!r}: expected a dataset name or path, got an empty string")
-    if name.endswith("-v0") and name[:-3] in KNOWN and not (minari_root() / name).is_dir() and not Path(name).exists():
-        name = name[:-3]  # the Minari id of a generated dataset (its cache directory's name) is the dataset
+    base = split_version(name)[0]
+    if base != name and base in KNOWN and is_current(name) and not (minari_root() / name).is_dir() \
+            and not Path(name).exists():
+        name = base  # the Minari id of a generated dataset's current version (its cache directory's name)
     if max_transitions is not None and max_transitions <= 0:
         raise DatasetError(f"max_transitions = {max_transitions} must be positive")
     if name in SHARED_NAMES:

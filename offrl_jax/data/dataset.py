@@ -9,6 +9,7 @@ forever" assumption as the r_T / (1 - gamma) tail of the returns-to-go.
 from __future__ import annotations
 
 import dataclasses
+import re
 from pathlib import Path
 
 import numpy as np
@@ -92,14 +93,36 @@ def normalize_obs(obs: np.ndarray, mean: np.ndarray, std: np.ndarray) -> np.ndar
     return (obs - mean) / std
 
 
-def dataset_dir(name: str) -> Path:
-    """The cached Minari directory of generated dataset `name`: cache_dir()/datasets/<name>-v0.
+# Generated datasets whose making changed, with their current version (every other generated dataset is at 0).  An
+# earlier version stays loadable by its Minari id, "<name>-v<N>" (docs/datasets.md, "Versions").
+DATASET_VERSIONS: dict[str, int] = {"hopper-medium": 1, "hopper-medium-expert": 1}
+_VERSION = re.compile(r"^(?P<base>.+)-v(?P<version>\d+)$")
 
-    The `-v0` suffix is Minari's id convention, so `MINARI_DATASETS_PATH=<cache>/datasets minari list local` and
-    `minari.load_dataset("hopper-medium-v0")` see our datasets.  A directory from before the suffix is renamed.
+
+def split_version(name: str) -> tuple[str, int]:
+    """("hopper-medium", 0) for "hopper-medium-v0"; a name without a version is its current one."""
+    m = _VERSION.match(name)
+    if m:
+        return m["base"], int(m["version"])
+    return name, DATASET_VERSIONS.get(name, 0)
+
+
+def is_current(name: str) -> bool:
+    """Whether `name` (with or without a version) stands for the current version of its dataset."""
+    base, version = split_version(name)
+    return version == DATASET_VERSIONS.get(base, 0)
+
+
+def dataset_dir(name: str) -> Path:
+    """The cached Minari directory of generated dataset `name`: cache_dir()/datasets/<name>-v<version>, the current
+    version unless `name` names one ("hopper-medium-v0").
+
+    The `-v<N>` suffix is Minari's id convention, so `MINARI_DATASETS_PATH=<cache>/datasets minari list local` and
+    `minari.load_dataset("hopper-medium-v1")` see our datasets.  A directory from before the suffix is renamed.
     """
     root = cache_dir() / "datasets"
-    path, legacy = root / f"{name}-v0", root / name
-    if not path.exists() and (legacy / "data" / "metadata.json").is_file():
+    base, version = split_version(name)
+    path, legacy = root / f"{base}-v{version}", root / base
+    if version == 0 and not path.exists() and (legacy / "data" / "metadata.json").is_file():
         legacy.rename(path)
     return path

@@ -17,7 +17,7 @@ The replay levels read the SAC run directory `cache_dir()/"sac"/<env>-seed<sac_s
 shipped checkpoints, if present); if it is missing it is trained there first (progress bar), up to the needed step.
 
 On disk: `out_dir/data/{main_data.hdf5, metadata.json}` written by `minari.create_dataset_from_buffers` (dataset id
-`<name>-v0`), plus `out_dir/offrl_jax.json` (env, policy checkpoint, seeds, D4RL reference scores, statistics).
+`<name>-v<version>`), plus `out_dir/offrl_jax.json` (env, policy checkpoint, seeds, D4RL reference scores, statistics).
 Load with `minari.load_dataset(out_dir.name)` under `MINARI_DATASETS_PATH=out_dir.parent`, or
 `MinariDataset(out_dir/"data")`.
 """
@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from offrl_jax.data.dataset import Dataset, dataset_dir
+from offrl_jax.data.dataset import Dataset, dataset_dir, is_current, split_version
 from offrl_jax.data.generate.collect import (
     MEDIUM_TARGET_SCORE,
     POLICY_DIR,
@@ -58,15 +58,16 @@ D4RL_V2_STATS: dict[str, dict[str, float]] = {
 
 
 def parse_name(name: str) -> tuple[str, str]:
-    """"hopper-medium-replay" -> ("hopper", "medium-replay"); raises ValueError for unknown names."""
-    env, _, level = name.partition("-")
+    """"hopper-medium-replay" -> ("hopper", "medium-replay"), "hopper-medium-v0" -> ("hopper", "medium"); raises
+    ValueError for unknown names."""
+    env, _, level = split_version(name)[0].partition("-")
     if env not in GEN_ENVS or level not in LEVELS:
         raise ValueError(f"unknown dataset '{name}'; valid: {', '.join(DATASET_NAMES)}")
     return env, level
 
 
 def default_dir(name: str) -> Path:
-    """Where `generate(name)` writes by default: cache_dir()/"datasets"/<name>-v0 (`dataset_dir`)."""
+    """Where `generate(name)` writes by default: cache_dir()/"datasets"/<name>-v<version> (`dataset_dir`)."""
     return dataset_dir(name)
 
 
@@ -75,8 +76,15 @@ def sac_run_dir(env: str, sac_seed: int = 0) -> Path:
     return cache_dir() / "sac" / f"{env}-seed{sac_seed}"
 
 
-def _policy(env: str, level: str) -> tuple[Any, dict[str, Any]]:
+def policy_name(env: str, level: str, version: int | None = None) -> str:
+    """The shipped policy a dataset version is made from: "<env>-<level>" for the current version of
+    <env>-<level>, "<env>-<level>-v<N>" for an earlier one (`DATASET_VERSIONS`)."""
     name = f"{env}-{level}"
+    return name if version is None or is_current(f"{name}-v{version}") else f"{name}-v{version}"
+
+
+def _policy(env: str, level: str, version: int | None = None) -> tuple[Any, dict[str, Any]]:
+    name = policy_name(env, level, version)
     if name not in shipped_policies():
         raise FileNotFoundError(
             f"no shipped '{name}' policy in {POLICY_DIR}; train one with `python -m offrl_jax.data.generate.sac "
@@ -92,7 +100,9 @@ def _replay(env: str, level: str, n: int | None, progress: bool, run_dir: Path |
     from offrl_jax.data.generate import sac
 
     policy_level = "medium" if level == "medium-replay" else "expert"
-    meta = shipped_policies().get(f"{env}-{policy_level}")
+    # the replay levels keep the SAC run and step of the first shipped checkpoints (version 0): a later medium
+    # version changes the data rolled out, not where the run that made the first one stopped
+    meta = shipped_policies().get(policy_name(env, policy_level, 0))
     if meta is None:
         raise FileNotFoundError(f"{env}-{level} needs the shipped {env}-{policy_level} checkpoint "
                                 "to know where to stop")
@@ -116,17 +126,18 @@ def build(name: str, transitions: int | None = None, seed: int = 0, progress: bo
           sac_run: str | Path | None = None) -> tuple[Dataset, dict[str, Any]]:
     """The in-memory dataset `name` and the provenance of its data (no writing)."""
     env, level = parse_name(name)
+    version = split_version(name)[1]
     n = transitions or DEFAULT_TRANSITIONS
     kw = {"num_envs": num_envs, "progress": progress}
     if level == "random":
         return collect(env, "random", n, seed, name=name, **kw), {"policy": "uniform random"}
     if level in ("medium", "expert"):
-        params, meta = _policy(env, level)
+        params, meta = _policy(env, level, version)
         ds = collect(env, params, n, seed, stochastic=True, hidden=tuple(meta["hidden"]), name=name, **kw)
         return ds, {"policy": {k: meta[k] for k in meta if k != "path"}, "stochastic": True}
     if level == "medium-expert":
         half = None if transitions is None else transitions // 2
-        med, src_m = build(f"{env}-medium", half, seed, progress, num_envs)
+        med, src_m = build(f"{env}-medium-v{version}", half, seed, progress, num_envs)  # same version as medium
         exp, src_e = build(f"{env}-expert", None if transitions is None else transitions - half, seed, progress,
                            num_envs)
         arrays = {f: np.concatenate([getattr(med, f), getattr(exp, f)]) for f in
@@ -137,7 +148,8 @@ def build(name: str, transitions: int | None = None, seed: int = 0, progress: bo
 
 
 def write_minari(ds: Dataset, out_dir: Path, info: dict[str, Any], overwrite: bool = False) -> Path:
-    """Write `ds` with `minari.create_dataset_from_buffers` into exactly `out_dir` (dataset id `<name>-v0`).
+    """Write `ds` with `minari.create_dataset_from_buffers` into exactly `out_dir` (dataset id `<name>-v<version>`,
+    `split_version`: "hopper-medium" is "hopper-medium-v1", "hopper-medium-v0" stays itself).
 
     Minari writes to $MINARI_DATASETS_PATH/<dataset_id>; we point that at a scratch folder next to `out_dir` and
     rename the result to `out_dir`, so any directory name works.
@@ -146,6 +158,8 @@ def write_minari(ds: Dataset, out_dir: Path, info: dict[str, Any], overwrite: bo
     import minari
     from minari.data_collector.episode_buffer import EpisodeBuffer
 
+    base, version = split_version(ds.name)
+    dataset_id = f"{base}-v{version}"
     out_dir = Path(out_dir).absolute()  # a relative MINARI_DATASETS_PATH would be taken inside its own folder
     if out_dir.exists() and not overwrite:
         raise FileExistsError(f"{out_dir} exists; pass overwrite=True to replace it")
@@ -177,7 +191,7 @@ def write_minari(ds: Dataset, out_dir: Path, info: dict[str, Any], overwrite: bo
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             dataset = minari.create_dataset_from_buffers(
-                f"{ds.name}-v0", buffers, env=gym.spec(spec.gym_id), algorithm_name=info.get("algorithm", "SAC"),
+                dataset_id, buffers, env=gym.spec(spec.gym_id), algorithm_name=info.get("algorithm", "SAC"),
                 author="offrl_jax", author_email="offrl_jax@users.noreply.github.com",
                 code_permalink="offrl_jax/data/generate", action_space=act_space, observation_space=obs_space,
                 ref_min_score=spec.ref_min_score, ref_max_score=spec.ref_max_score,
@@ -186,10 +200,10 @@ def write_minari(ds: Dataset, out_dir: Path, info: dict[str, Any], overwrite: bo
             dataset.storage.update_metadata({"offrl_jax": json.dumps(info)})
         # the provenance file goes in before the rename: a kill can never leave a dataset without it (which would
         # make a capped one look full-size)
-        atomic_write_text(scratch / f"{ds.name}-v0" / "offrl_jax.json", json.dumps(info, indent=1))
+        atomic_write_text(scratch / dataset_id / "offrl_jax.json", json.dumps(info, indent=1))
         if out_dir.exists():
             shutil.rmtree(out_dir)
-        (scratch / f"{ds.name}-v0").rename(out_dir)
+        (scratch / dataset_id).rename(out_dir)
     finally:
         if old is None:
             os.environ.pop("MINARI_DATASETS_PATH", None)
@@ -239,8 +253,8 @@ def generate(name: str, transitions: int | None = None, out_dir: str | Path | No
     """Generate dataset `name` (e.g. "hopper-medium") and write it with minari; returns its directory.
 
     transitions: cap on the number of rows (default 1M per policy; the replay levels default to the whole run).
-    out_dir: the dataset directory (default `dataset_dir(name)`: `cache_dir()/"datasets"/<name>-v0`); an existing
-        one raises unless overwrite, which replaces only a dataset directory written here (`check_replaceable`).
+    out_dir: the dataset directory (default `dataset_dir(name)`: `cache_dir()/"datasets"/<name>-v<version>`); an
+        existing one raises unless overwrite, which replaces only a dataset directory written here (`check_replaceable`).
     seed: env / action-noise seed of the rollouts.  sac_run: SAC run directory for the replay levels.
     demos: the human demonstrations door-cloned is made from (`offrl_jax.data.catalogue.load("door-human")`).
     shown_as: what the closing `[generate]` line names as the destination (default: the directory written).
@@ -282,4 +296,4 @@ def generate(name: str, transitions: int | None = None, out_dir: str | Path | No
 
 __all__ = ["generate", "check_replaceable", "build", "write_minari", "collect", "load_policy", "shipped_policies",
            "parse_name", "default_dir", "sac_run_dir", "DATASET_NAMES", "LEVELS", "GEN_ENVS", "D4RL_V2_STATS",
-           "MEDIUM_TARGET_SCORE"]
+           "MEDIUM_TARGET_SCORE", "policy_name"]
