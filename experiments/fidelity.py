@@ -4,8 +4,9 @@ from scratch, each beside D4RL's / CORL's published value (`offrl_jax.data.gener
 Two studies on one dataset, as CORL runs them: BC without LayerNorm (`--bc-updates`, default 20k: BC's score
 settles within that on this data) and TD3+BC from scratch with alpha 2.5 and no LayerNorm (`--td3bc-updates`,
 default 50k, about 20 minutes on one CPU core; CORL's scores are after 1M, so TD3+BC is compared at a twentieth of
-CORL's budget).  5 seeds each; the score of a study is the IQM of its seeds' final scores with a stratified-bootstrap 95 % interval.  Each goes to a
-sub-directory of the run directory; `fidelity.json` there holds the table, which the command prints.
+CORL's budget).  5 seeds each; the score of a study is the IQM of its seeds' final scores with a stratified-
+bootstrap 95 % interval.  Each study goes to a sub-directory of the run directory; `fidelity.json` there holds the
+table, which the command prints.
 
     python -m experiments.fidelity                                   # hopper-medium
     python -m experiments.fidelity --env walker2d --td3bc-updates 0  # behaviour and BC only
