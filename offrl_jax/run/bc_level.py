@@ -138,6 +138,9 @@ def table(summary: list[dict]) -> list[str]:
     return lines
 
 
+FLAG_NOTE = "; 'by the BC actor': reached at or before the hand-over, before any RL update"
+
+
 def flag(reach: dict) -> str:
     """' (k of n by the BC actor)' for a threshold that k seeds reached at or before their hand-over."""
     hits = reach.get("by_bc_actor")
