@@ -200,7 +200,8 @@ def main(argv=None) -> int:
             written = plot_aggregate(found, [read_curves(d / "curves.csv") for d in study_dirs], args.aggregate)
             print(f"aggregate figure: {', '.join(map(str, written))}", file=sys.stderr)
         if args.plot is not None:
-            written = plot_studies(study_dirs, args.plot, reference=not args.no_reference, overlay=args.overlay)
+            written = plot_studies(study_dirs, args.plot, reference=not args.no_reference, overlay=args.overlay,
+                                   summaries=found)
             print(f"figure: {', '.join(map(str, written))}", file=sys.stderr)
     except (OSError, ValueError, KeyError, IndexError) as e:
         print_error(e)

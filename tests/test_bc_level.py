@@ -6,6 +6,7 @@ import pytest
 
 from offrl_jax.run import stats
 from offrl_jax.run.aggregate import claims_table
+from offrl_jax.run.bc_level import figure_lines
 from offrl_jax.run.results import pretrain_ends_of
 from offrl_jax.run.study import Study, Variant
 from offrl_jax.run.summary import summarize, summary_table
@@ -80,6 +81,8 @@ def test_the_tables_show_the_bc_level_and_flag_what_the_bc_actor_reached():
     row = next(line for line in claims if line.startswith("| toy | pretrained vs scratch |"))
     assert row.endswith("| 50.0 (pretrained at 2,000) | ≥ 1.25x [1.25, 1.25] | ≥ 1.11x [1.00, 1.25] |")
     assert "| toy | critic-only vs scratch |" in claims_table([summary], ["toy"])
+    # the figures' line: one per comparison, at the level's seed mean
+    assert figure_lines(summary) == [(50.0, "BC level: pretrained at 2,000 (50.0)")]
 
 
 def test_a_bc_arm_is_the_level_of_a_study_without_a_hand_over():
@@ -97,6 +100,7 @@ def test_a_bc_arm_is_the_level_of_a_study_without_a_hand_over():
     text = summary_table(list(summary.values()))
     assert "| BC | 7.0 [5.0, 9.0] | 5 9 | its final score (a BC arm) | n/a (BC) |  |" in text
     assert "| TD3+BC | 7.0 [5.0, 9.0] | 5 9 | BC's final score (a BC arm) | 0.0 [-3.0, 3.0] | -3 3 |" in text
+    assert figure_lines(list(summary.values())) == [(7.0, "BC level: BC final, a BC arm (7.0)")]
     # 7 + 50 % of the way to the best seed-mean evaluation (7 at 2000, BC's): no way to go, no such threshold
     assert not any(r["threshold"].startswith("BC +") for r in td3bc["reach"])
 
@@ -109,7 +113,7 @@ def test_a_study_without_pre_training_or_bc_prints_nothing_new():
     summary = summarize(study, rows, pretrain_ends_of(rows))
     assert all(s["bc_level"] is None and s["improvement_over_bc"] is None for s in summary)
     assert not any(r["threshold"].startswith("BC +") for s in summary for r in s["reach"])
-    assert "BC" not in summary_table(summary)
+    assert "BC" not in summary_table(summary) and figure_lines(summary) == []
     row = next(line for line in claims_table([summary], ["x"]).splitlines() if line.startswith("| x |"))
     assert row.endswith("| n/a | n/a | n/a |")
 

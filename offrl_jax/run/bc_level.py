@@ -141,6 +141,19 @@ def table(summary: list[dict]) -> list[str]:
 FLAG_NOTE = "; 'by the BC actor': reached at or before the hand-over, before any RL update"
 
 
+def figure_lines(summary: list[dict]) -> list[tuple[float, str]]:
+    """[(score, legend label)]: the BC level of every comparison of a study (seed mean), for a figure's
+    horizontal line; none for a summary without one (or written before BC levels were recorded)."""
+    found = {}
+    for s in summary:
+        level = s.get("comparison_bc_level")
+        if level and level.get("mean") is not None:
+            where = "final, a BC arm" if level["update"] is None else f"at {level['update']:,}"
+            found[(level["source"], level["update"])] = (level["mean"],
+                                                         f"BC level: {level['source']} {where} ({level['mean']:.1f})")
+    return list(found.values())
+
+
 def flag(reach: dict) -> str:
     """' (k of n by the BC actor)' for a threshold that k seeds reached at or before their hand-over."""
     hits = reach.get("by_bc_actor")

@@ -355,5 +355,5 @@ def merge_runs(run_dirs: list[Path], out_dir: Path, behaviour: float | None = No
     atomic_write_text(out_dir / "config.json", study.record_json(previous=json.dumps({"runs": records})))
     write_curves(out_dir / "curves.csv", rows)
     atomic_write_text(out_dir / "summary.json", summary_json(summary))
-    plot_curves(out_dir / "curves.png", study, rows, ends)
+    plot_curves(out_dir / "curves.png", study, rows, ends, bc_level.figure_lines(summary))
     return summary
