@@ -75,6 +75,8 @@ def test_the_tables_show_the_bc_level_and_flag_what_the_bc_actor_reached():
             "20.0 [20.0, 20.0] | 20 20 |") in text
     assert "| behaviour data | 35.0 | 2k 2k (2 of 2 by the BC actor) | 4k 3k |" in text
     assert "| BC + 50% to best | 65.0 | 4k 4k | >5k 5k (1 censored) | ≥ 1.25x [1.25, 1.25] |" in text
+    assert ("BC + x % to best: x % of the way from the BC level (50.0, pretrained's actor at the hand-over, update "
+            "2,000) to the best seed-mean evaluation (80.0); 'by the BC actor': reached at or before") in text
     claims = claims_table([summary], ["toy"]).splitlines()
     # the comparison's level (mean 50, pretrained's at 2000) and the speed-ups to 65 and 77; 77: scratch [>5k, 5k]
     # against pretrained [4k, 5k], the latter's resample means 4000, 4500, 5000, each end with probability 1/4

@@ -109,7 +109,12 @@ def by_bc_actor(reach: np.ndarray, censored: np.ndarray, level: BCLevel | None, 
 
 
 # ------------------------------------------------------------------------------------------------------- text
-def _where(level: dict, variant: str) -> str:
+def _finite(x) -> bool:
+    return isinstance(x, (int, float)) and np.isfinite(x)
+
+
+def _where(level: dict, variant: str | None = None) -> str:
+    """Whose BC level it is, seen from `variant` ('its' where it is the variant's own)."""
     whose = "its" if level["source"] == variant else f"{level['source']}'s"
     if level["update"] is None:
         return f"{whose} final score (a BC arm)"
@@ -138,7 +143,17 @@ def table(summary: list[dict]) -> list[str]:
     return lines
 
 
-FLAG_NOTE = "; 'by the BC actor': reached at or before the hand-over, before any RL update"
+def threshold_note(variant: dict) -> str:
+    """The caption's words on a comparison's BC-relative thresholds and its BC actor ('' where it has neither)."""
+    level, best = variant.get("comparison_bc_level"), variant.get("best_score")
+    note = ""
+    if any(r["threshold"] == threshold_name(FRACTIONS[0]) for r in variant["reach"]) and level:
+        note += (f"; BC + x % to best: x % of the way from the BC level ({level['mean']:.1f}, "
+                 f"{_where(level)}) to "
+                 f"the best seed-mean evaluation ({best:.1f})")
+    if any("by_bc_actor" in r for r in variant["reach"]):
+        note += "; 'by the BC actor': reached at or before the hand-over, before any RL update"
+    return note
 
 
 def figure_lines(summary: list[dict]) -> list[tuple[float, str]]:
@@ -147,7 +162,7 @@ def figure_lines(summary: list[dict]) -> list[tuple[float, str]]:
     found = {}
     for s in summary:
         level = s.get("comparison_bc_level")
-        if level and level.get("mean") is not None:
+        if level and _finite(level.get("mean")):
             where = "final, a BC arm" if level["update"] is None else f"at {level['update']:,}"
             found[(level["source"], level["update"])] = (level["mean"],
                                                          f"BC level: {level['source']} {where} ({level['mean']:.1f})")
@@ -164,7 +179,7 @@ def claim_cells(variant: dict) -> list[str]:
     """The claims table's BC cells of a variant compared with its reference: the comparison's BC level (seed
     mean), and the speed-up to BC + 50 % and + 90 % to best, each flagged where the BC actor reached it."""
     vs, level = variant.get("vs_reference") or {}, variant.get("comparison_bc_level")
-    if not level or not vs:
+    if not level or not vs or not _finite(level.get("mean")):
         return ["n/a"] * (1 + len(FRACTIONS))
     cells = [f"{level['mean']:.1f} ({level['source']}"
              + (", a BC arm)" if level["update"] is None else f" at {level['update']:,})")]

@@ -257,7 +257,7 @@ def summary_table(summary: list[dict]) -> str:
         lines += ["", f"{s['variant']} vs {ref['variant']}: updates to each threshold per seed (pre-training "
                       f"included; a censored seed never reached it and counts at the budget); speed-up = mean "
                       f"updates of {ref['variant']} / of {s['variant']} [95 % CI]; ≥ where {ref['variant']} has "
-                      f"censored seeds{bc_level.FLAG_NOTE if any('by_bc_actor' in r for r in s['reach']) else ''}. "
+                      f"censored seeds{bc_level.threshold_note(s)}. "
                       f"{ref['variant']}'s final "
                       + (f"{ref['final_score_mean']:.1f}" if _known(ref["final_score_mean"]) else "n/a")
                       + (f", its trend {_est(trend, '+.1f')} over the last 20 % of evaluations: "
