@@ -37,9 +37,9 @@ from offrl_jax.data.dataset import Dataset
 from offrl_jax.data.device import DeviceData, DeviceForms, device_data
 from offrl_jax.driver import Driver
 from offrl_jax.envs.evaluate import evaluate_normalized, make_policy
+from offrl_jax.run.bc_level import figure_lines
 from offrl_jax.run.loggers import make_logger
 from offrl_jax.run.provenance import fingerprint
-from offrl_jax.run.bc_level import figure_lines
 from offrl_jax.run.results import plot_curves, pretrain_ends_of, write_curves
 from offrl_jax.run.resume import check_resume, checkpoint_path, group_identity, kept_updates
 from offrl_jax.run.study import Study, Variant
