@@ -136,3 +136,26 @@ def test_the_bc_level_statistics_by_hand():
     reach, censored = np.array([2000, 3000, 3000]), np.array([False, False, True])
     assert stats.reached_by(reach, censored, 2000).tolist() == [True, False, False]
     assert stats.reached_by(reach, censored, 3000).tolist() == [True, True, False]  # censored: never reached
+
+
+def test_a_committed_run_is_reported_with_its_bc_level(capsys):
+    """A run committed before BC levels were recorded gets them from its curves.csv: the pre-trained arm's scores at
+    its last pre-training evaluation, read here straight from the file."""
+    import csv
+    from pathlib import Path
+
+    from experiments import report
+
+    run = Path(__file__).resolve().parents[1] / "results" / "mujoco_medium" / "default-5seeds"
+    if not (run / "curves.csv").is_file():
+        pytest.skip("the committed run is not in this checkout")
+    with open(run / "curves.csv", newline="") as f:
+        rows = [r for r in csv.DictReader(f) if r["variant"] == "pretrained" and r["phase"] != "offline_rl"]
+    end = max(int(r["update"]) for r in rows)
+    at_end = [float(r["score"]) for r in sorted(rows, key=lambda r: int(r["seed"])) if int(r["update"]) == end]
+    assert report.main([str(run), "--no-reference"]) == 0
+    out = capsys.readouterr().out
+    cells = " ".join(f"{x:.0f}" for x in at_end)
+    assert f"| pretrained | {stats.interval([np.array(at_end)], stats.iqm).text()} | {cells} | its actor at the " \
+           f"hand-over, update {end:,} |" in out
+    assert f"| scratch | {stats.interval([np.array(at_end)], stats.iqm).text()} | {cells} | pretrained's actor" in out
