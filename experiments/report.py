@@ -3,7 +3,8 @@
     python -m experiments.report results/mujoco_medium/default results/figure2/*/
 
 Per run directory, the study's tables (`offrl_jax.run.summary`): per variant the final score, the last evaluation and
-the mean over the run as IQM over seeds with stratified-bootstrap 95 % intervals; against the from-scratch variant,
+the mean over the run as IQM over seeds with stratified-bootstrap 95 % intervals, the BC level and the improvement
+over it (`offrl_jax.run.bc_level`); against the from-scratch variant,
 every seed's updates to each threshold (censored seeds counted at the budget), the speed-up with its interval, the
 probability of improvement and the verdict on the paper's claim.  A run with config.json and curves.csv is
 re-summarised from them, so runs made before these statistics existed get them too.  A directory holding several
@@ -200,7 +201,8 @@ def main(argv=None) -> int:
             written = plot_aggregate(found, [read_curves(d / "curves.csv") for d in study_dirs], args.aggregate)
             print(f"aggregate figure: {', '.join(map(str, written))}", file=sys.stderr)
         if args.plot is not None:
-            written = plot_studies(study_dirs, args.plot, reference=not args.no_reference, overlay=args.overlay)
+            written = plot_studies(study_dirs, args.plot, reference=not args.no_reference, overlay=args.overlay,
+                                   summaries=found)
             print(f"figure: {', '.join(map(str, written))}", file=sys.stderr)
     except (OSError, ValueError, KeyError, IndexError) as e:
         print_error(e)

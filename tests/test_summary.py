@@ -27,7 +27,9 @@ def test_summary_numbers_by_hand():
     assert pre["final_iqm"]["value"] == 90 and (pre["final_iqm"]["low"], pre["final_iqm"]["high"]) == (80, 100)
     # the reference still climbs: last 20 % (95) minus the 20 % before (75): no asymptote, so no threshold of it
     assert scr["asymptote_trend"]["value"] == pytest.approx(20.0) and not scr["asymptote_flat"]
-    assert [r["threshold"] for r in pre["reach"]] == ["behaviour data", "80% of best", "90% of best", "95% of best"]
+    # and the BC-relative ones: the BC level at the hand-over (1000) is 50 on both seeds, the best 100
+    assert [r["threshold"] for r in pre["reach"]] == ["behaviour data", "80% of best", "90% of best", "95% of best",
+                                                      "BC + 50% to best", "BC + 90% to best"]
     # best seed-mean evaluation of any variant: scratch's 100 at 10k (pretrained's best mean is 90)
     assert pre["best_score"] == 100
     by = {r["threshold"]: r for r in pre["reach"]}
@@ -147,8 +149,10 @@ def test_the_table_shows_every_seed_and_marks_censored_seeds_and_lower_bounds():
     text = summary_table(summarize(study, rows, {"pretrained": 1000}))
     # 90 % of the best seed-mean evaluation (95.5) is 85.95: pretrained at 1k and 2k, scratch never (censored at
     # the 3k budget) and at 2k: 2.5k / 1.5k, a lower bound; the arms' resample means span 1-2k and 2-3k, each end
-    # with probability 1/4, so the 95 % interval is [2k/2k, 3k/1k]
-    assert "| 90% of best (headline) | 86.0 | 1k 2k | >3k 2k (1 censored) | ≥ 1.67x [1.00, 3.00] |" in text
+    # with probability 1/4, so the 95 % interval is [2k/2k, 3k/1k]; seed 0 got there at the hand-over (1k), as the
+    # BC actor
+    assert ("| 90% of best (headline) | 86.0 | 1k 2k (1 of 2 by the BC actor) | >3k 2k (1 censored) | "
+            "≥ 1.67x [1.00, 3.00] |") in text
     assert text.endswith("pretrained needs fewer updates than scratch to reach 90% of best: undecided: the interval "
                          "holds 1.")
     assert "| scratch | 60.0 [30.0, 90.0] |" in text and "final per seed" in text

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from offrl_jax.run import stats
+from offrl_jax.run import bc_level, stats
 from offrl_jax.run.results import all_nan_expected, score_matrix
 from offrl_jax.system.checkpoint import atomic_write_bytes
 
@@ -69,23 +69,24 @@ def aggregate_table(result: dict) -> str:
 def claims_table(summaries: list[list[dict]], names: list[str]) -> str:
     """One row per comparison of every study (`names`: how to call each): seeds, the headline threshold, the
     speed-up with its interval (≥: the reference has censored seeds), the probability of improvement of the
-    final score, and the verdict."""
+    final score, the verdict, and the BC level with the speed-ups to the BC-relative thresholds
+    (`bc_level.claim_cells`); a speed-up whose threshold the BC actor reached is flagged."""
     lines = ["| study | variant vs reference | seeds | headline threshold | speed-up (updates) | P(final better) | "
-             "fewer updates? |", "|---|---|--:|---|--:|--:|---|"]
+             "fewer updates? | BC level (seed mean) | speed-up to BC + 50 % to best | speed-up to BC + 90 % to best |",
+             "|---|---|--:|---|--:|--:|---|--:|--:|--:|"]
     for name, summary in zip(names, summaries):
         for s in summary:
             vs = s.get("vs_reference")
             if not vs:
                 continue
             head = next((x for x in vs["speedup"] if x["threshold"] == vs["headline"]), None)
-            ratio = "n/a" if head is None else stats.Estimate.from_json(head["updates"]).text(".2f", "x")
-            if head is not None and head["reference_censored"] and ratio != "n/a":
-                ratio = "≥ " + ratio
+            ratio = "n/a" if head is None else bc_level.speedup_text(head)
             threshold = "n/a" if head is None else f"{vs['headline']} ({head['score']:.1f})"
             verdict = {"holds": "yes", "does not hold": "no"}.get(vs["verdict"], vs["verdict"])
             lines.append(f"| {name} | {s['variant']} vs {vs['reference']} | {len(s['seeds'])} | {threshold} | "
-                         f"{ratio} | {stats.Estimate.from_json(vs['poi_final']).text('.2f')} | {verdict} |")
-    return "\n".join(lines)
+                         f"{ratio} | {stats.Estimate.from_json(vs['poi_final']).text('.2f')} | {verdict} | "
+                         + " | ".join(bc_level.claim_cells(s)) + " |")
+    return "\n".join(lines + ["", bc_level.CLAIMS_NOTE])
 
 
 def common_updates(curves: list[list[dict]], arm: str) -> np.ndarray:

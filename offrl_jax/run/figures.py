@@ -2,8 +2,9 @@
 
 Each panel draws every variant's IQM score over seeds against updates with its 95 % bootstrap interval
 (`offrl_jax.run.results.iqm_band`), a dotted line
-where pre-training ended, and a dashed line at the behaviour data's score (the mean D4RL-normalised return of the
-dataset's episodes) when that dataset is in the cache.  `overlay=True` draws every study in one panel instead.
+where pre-training ended, a dashed line at the behaviour data's score (the mean D4RL-normalised return of the
+dataset's episodes) when that dataset is in the cache, and a dash-dot line at the study's BC level
+(`offrl_jax.run.bc_level`; not with `overlay`).  `overlay=True` draws every study in one panel instead.
 Updates are ticked as 20k / 1M; the figure is written as PNG and PDF.
 """
 from __future__ import annotations
@@ -13,6 +14,7 @@ import io
 import json
 from pathlib import Path
 
+from offrl_jax.run.bc_level import figure_lines
 from offrl_jax.run.results import all_nan_expected, iqm_band, read_curves, score_matrix
 from offrl_jax.system.checkpoint import atomic_write_bytes
 
@@ -50,16 +52,18 @@ def updates_label(x: float, _=None) -> str:
     return f"{x / 1e3:g}k" if abs(x) >= 1e3 else f"{x:g}"
 
 
-def plot_studies(study_dirs: list[Path], path: Path, reference: bool = True, overlay: bool = False) -> list[Path]:
-    """One panel per study directory (its summary.json and curves.csv), or all in one (`overlay`), written to
-    `path` as PNG and beside it as PDF; returns the files written."""
+def plot_studies(study_dirs: list[Path], path: Path, reference: bool = True, overlay: bool = False,
+                 summaries: list[list[dict]] | None = None) -> list[Path]:
+    """One panel per study directory (its summary.json, or its summary in `summaries`, and its curves.csv), or all in
+    one (`overlay`), written to `path` as PNG and beside it as PDF; returns the files written."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.ticker import FuncFormatter
 
-    summaries = [json.loads((d / "summary.json").read_text()) for d in study_dirs]
+    if summaries is None:
+        summaries = [json.loads((d / "summary.json").read_text()) for d in study_dirs]
     rows, cols = ([""], ["0"]) if overlay else panel_grid(summaries)
     fig, axes = plt.subplots(len(rows), len(cols), figsize=(4.2 * len(cols), 3.2 * len(rows)), squeeze=False)
     used = set()
@@ -84,6 +88,8 @@ def plot_studies(study_dirs: list[Path], path: Path, reference: bool = True, ove
         behaviour = behaviour_score(summary[0]["dataset"]) if reference else None
         if behaviour is not None:
             ax.axhline(behaviour, color="grey", ls="--", lw=1, label=f"behaviour data ({behaviour:.1f})")
+        for score, label in [] if overlay else figure_lines(summary):
+            ax.axhline(score, color="black", ls="-.", lw=1, label=label)
         if not overlay:
             n = len(summary[0]["seeds"])
             ax.set_title(f"{summary[0]['dataset']}, {ALGO_NAMES.get(algo, algo)} ({n} seed{'s' * (n != 1)})",

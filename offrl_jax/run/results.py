@@ -127,7 +127,10 @@ def curves_title(name: str, dataset: str, seeds: int) -> str:
 
 
 @all_nan_expected()
-def plot_curves(path: Path, study: Study, rows: list[dict], pretrain_ends: dict[str, int]) -> None:
+def plot_curves(path: Path, study: Study, rows: list[dict], pretrain_ends: dict[str, int],
+                bc_levels: list[tuple[float, str]] = ()) -> None:
+    """curves.png: every variant's IQM over seeds with its band, a dotted line where its pre-training ended, and a
+    dash-dot line at each (score, label) of `bc_levels` (`bc_level.figure_lines`)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -143,6 +146,8 @@ def plot_curves(path: Path, study: Study, rows: list[dict], pretrain_ends: dict[
         ax.fill_between(updates, low, high, alpha=0.2, color=f"C{i}")
         if pretrain_ends.get(v.label):
             ax.axvline(pretrain_ends[v.label], color=line.get_color(), ls=":", lw=1)
+    for score, label in bc_levels:
+        ax.axhline(score, color="black", ls="-.", lw=1, label=label)
     ax.set_xlabel("updates (pre-training included; dotted: end of pre-training)")
     ax.set_ylabel("D4RL-normalised score")
     ax.set_title(curves_title(study.name, study.dataset, len(study.seeds)), fontsize=10)

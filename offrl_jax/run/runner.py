@@ -37,6 +37,7 @@ from offrl_jax.data.dataset import Dataset
 from offrl_jax.data.device import DeviceData, DeviceForms, device_data
 from offrl_jax.driver import Driver
 from offrl_jax.envs.evaluate import evaluate_normalized, make_policy
+from offrl_jax.run.bc_level import figure_lines
 from offrl_jax.run.loggers import make_logger
 from offrl_jax.run.provenance import fingerprint
 from offrl_jax.run.results import plot_curves, pretrain_ends_of, write_curves
@@ -131,7 +132,7 @@ def run_study(study: Study, out_dir: Path, dataset: Dataset, resume: bool = Fals
     summary = summarize(study, history, pretrain_ends, behaviour_score(dataset))
     if writer:
         atomic_write_text(out_dir / "summary.json", summary_json(summary))
-        plot_curves(out_dir / "curves.png", study, history, pretrain_ends)
+        plot_curves(out_dir / "curves.png", study, history, pretrain_ends, figure_lines(summary))
     return summary
 
 

@@ -6,7 +6,9 @@ edge of the statistical precipice"; the definitions are rliable's).
   task) is resampled on its own, so samples of different sizes are fine (`scipy.stats.bootstrap`), and a fixed
   `seed` gives the same interval every time.  Fewer than two values in a sample: no interval.
 - `first_reach`: per seed, the first evaluation at or above a threshold; a seed that never gets there is censored
-  at the budget (counted, never dropped).
+  at the budget (counted, never dropped).  `reached_by`: the seeds that got there at or before a given update.
+- `score_at`: per seed, the score of one evaluation (the BC level: the score where pre-training hands over).
+- `way_from`: the score a fraction of the way from one level to another (the BC-relative thresholds).
 - `speedup`: (mean updates of the reference arm) / (mean updates of the improved arm) to a threshold, censored
   seeds at the budget, with its interval; a censored reference seed makes it a lower bound.
 - `probability_of_improvement`: P(X > Y) + P(X = Y) / 2 for one draw of each arm (Mann-Whitney U / (n m)).
@@ -101,6 +103,23 @@ def first_reach(updates: np.ndarray, scores: np.ndarray, threshold: float) -> tu
     censored = ~hit.any(axis=1)
     reach = np.where(censored, updates[-1], updates[np.argmax(hit, axis=1)])
     return reach, censored
+
+
+def reached_by(reach: np.ndarray, censored: np.ndarray, update: int) -> np.ndarray:
+    """(S,) bool: the seeds of `first_reach`'s (reach, censored) that reached the threshold at or before `update`."""
+    return ~np.asarray(censored, dtype=bool) & (np.asarray(reach) <= update)
+
+
+def score_at(updates: np.ndarray, scores: np.ndarray, update: int) -> np.ndarray:
+    """(S,): per seed the score of `scores` (S, E) at the evaluation `update` of `updates` (E,), which must be one."""
+    updates = np.asarray(updates)
+    (j,) = np.flatnonzero(updates == update)
+    return np.asarray(scores, dtype=float)[:, j]
+
+
+def way_from(start: float, end: float, fraction: float) -> float:
+    """The score `fraction` of the way from `start` to `end`: start + fraction (end - start)."""
+    return start + fraction * (end - start)
 
 
 def ratio_of_means(reference: np.ndarray, improved: np.ndarray, axis: int = -1) -> np.ndarray:

@@ -7,6 +7,9 @@ Every measure is per seed first (`offrl_jax.run.stats`), then aggregated with a 
   does censored at the budget; the thresholds: the behaviour data's score, 80/90/95 % of the best seed-mean
   evaluation of any variant, and 80/90/95 % of the from-scratch final where that is an asymptote (the interval of
   its change over the last 20 % of evaluations within +-5 % of its level, `stats.trend_is_flat`);
+- the BC level (`offrl_jax.run.bc_level`: the pre-trained actor's score at the hand-over, or a BC arm's final) and
+  per seed the improvement over it, with BC + 50 % and BC + 90 % of the way to the best score as thresholds too, and
+  per threshold the seeds that reached it by the BC actor, before any RL update;
 - against the from-scratch reference: the speed-up (reference's mean updates / this variant's) with its interval,
   the probability of improvement of the final score, and whether the paper's claim (fewer updates) holds at the
   headline threshold: 90 % of the asymptote where there is one, else 90 % of the best score.
@@ -20,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from offrl_jax.run import stats
+from offrl_jax.run import bc_level, stats
 from offrl_jax.run.results import (
     all_nan_expected,
     check_curve_seeds,
@@ -78,6 +81,8 @@ def _summarize(study: Study, rows: list[dict], pretrain_ends: dict[str, int], be
               for label, (u, _, s) in curves.items()}
     means = [np.nanmean(s, axis=0) for u, _, s in curves.values() if len(u)]
     best = max((float(np.nanmax(m)) for m in means if np.isfinite(m).any()), default=None)
+    own = bc_level.own_levels(study, curves, finals, pretrain_ends)
+    shared = bc_level.comparison_levels(study, own)
     summary = []
     for v in study.variants:
         updates, seconds, scores = curves[v.label]
@@ -87,7 +92,8 @@ def _summarize(study: Study, rows: list[dict], pretrain_ends: dict[str, int], be
         trend, flat = stats.trend_is_flat(ref_curve) if ref_curve is not None else (None, False)
         thresholds = ([("behaviour data", behaviour)] if behaviour is not None else []) + [
             (f"{f:.0%} of best", fraction_of(best, f)) for f in FRACTIONS if best is not None] + [
-            (f"{f:.0%} of asymptote", fraction_of(asymptote, f)) for f in FRACTIONS if flat]
+            (f"{f:.0%} of asymptote", fraction_of(asymptote, f)) for f in FRACTIONS if flat] + (
+            bc_level.thresholds(shared.get(v.label), best))
         config = study.config(v.label)
         mean_curve = np.nanmean(scores, axis=0) if len(updates) else np.array([np.nan])
         peak = int(np.nanargmax(mean_curve)) if np.isfinite(mean_curve).any() else None
@@ -99,6 +105,11 @@ def _summarize(study: Study, rows: list[dict], pretrain_ends: dict[str, int], be
             reach.append({"threshold": name, "score": value, "updates": at.tolist(),
                           "seconds": [float(seconds[np.searchsorted(updates, u)]) for u in at],
                           "censored": censored.tolist()})
+            if (by_bc := bc_level.by_bc_actor(at, censored, own.get(v.label), v.label)) is not None:
+                reach[-1]["by_bc_actor"] = by_bc  # per seed: reached at or before the hand-over
+        level = own.get(v.label) or shared.get(v.label)
+        is_bc_arm = level is not None and level.source == v.label and level.update is None
+        gain = bc_level.improvement(finals[v.label], level) if level is not None and not is_bc_arm else None
         summary.append({
             "variant": v.label, "env": study.env, "dataset": study.dataset, "algo": v.algo,
             "pretrain": getattr(config, "pretrain", "none"), "seeds": list(study.seeds), "updates": study.updates,
@@ -115,6 +126,12 @@ def _summarize(study: Study, rows: list[dict], pretrain_ends: dict[str, int], be
             # lies within +-5 % of its level: only a flat one is an asymptote the thresholds may be fractions of
             "asymptote_trend": trend.to_json() if trend is not None else None, "asymptote_flat": flat,
             "best_score": best, "reach": reach,
+            # the BC level this variant's improvement is measured from, the one its comparison's thresholds are
+            # measured from (the same for most), and per seed the final score minus the first
+            "bc_level": level.to_json() if level else None,
+            "comparison_bc_level": shared[v.label].to_json() if v.label in shared else None,
+            "improvement_over_bc": gain.tolist() if gain is not None else None,
+            "improvement_iqm": stats.interval([gain], stats.iqm).to_json() if gain is not None else None,
             # the seed-mean curve's best evaluation, and how far the final score is below it (the paper's
             # stability question: does a variant stay up?)
             "peak_score_mean": float(mean_curve[peak]) if peak is not None else float("nan"),
@@ -144,7 +161,8 @@ def compare(mine: dict, ref: dict) -> dict:
         speedups.append({"threshold": a["threshold"], "score": a["score"],
                          "updates": stats.speedup(np.array(b["updates"]), np.array(a["updates"])).to_json(),
                          "seconds": stats.speedup(np.array(b["seconds"]), np.array(a["seconds"])).to_json(),
-                         "censored": sum(a["censored"]), "reference_censored": sum(b["censored"])})
+                         "censored": sum(a["censored"]), "reference_censored": sum(b["censored"]),
+                         "by_bc_actor": sum(a.get("by_bc_actor") or []), "seeds": len(a["censored"])})
     names = [s["threshold"] for s in speedups]
     headline = "90% of asymptote" if "90% of asymptote" in names else "90% of best" if "90% of best" in names else None
     return {"reference": ref["variant"], "speedup": speedups, "headline": headline,
@@ -228,6 +246,7 @@ def summary_table(summary: list[dict]) -> str:
         peak = f"{peak:.1f} at {s['peak_update']:,} ({s['fall_from_peak']:.1f})" if _known(peak) else "n/a"
         lines.append(f"| {variant} | {_est(s['final_iqm'])} | {_est(s['last_iqm'])} | {_est(s['auc_iqm'])} | "
                      f"{per_seed} | {s['pretrain_updates']:,} | {peak} |")
+    lines += bc_level.table(summary)
     by_label = {s["variant"]: s for s in summary}
     for s in summary:
         vs = s.get("vs_reference")
@@ -238,7 +257,8 @@ def summary_table(summary: list[dict]) -> str:
         lines += ["", f"{s['variant']} vs {ref['variant']}: updates to each threshold per seed (pre-training "
                       f"included; a censored seed never reached it and counts at the budget); speed-up = mean "
                       f"updates of {ref['variant']} / of {s['variant']} [95 % CI]; ≥ where {ref['variant']} has "
-                      f"censored seeds. {ref['variant']}'s final "
+                      f"censored seeds{bc_level.threshold_note(s)}. "
+                      f"{ref['variant']}'s final "
                       + (f"{ref['final_score_mean']:.1f}" if _known(ref["final_score_mean"]) else "n/a")
                       + (f", its trend {_est(trend, '+.1f')} over the last 20 % of evaluations: "
                          + ("flat, an asymptote" if ref.get("asymptote_flat") else "not flat, no asymptote")
@@ -249,7 +269,8 @@ def summary_table(summary: list[dict]) -> str:
                   "|---|--:|--:|--:|--:|--:|"]
         for sp, a, b in zip(vs["speedup"], s["reach"], ref["reach"]):
             mark = " (headline)" if sp["threshold"] == vs["headline"] else ""
-            lines.append(f"| {sp['threshold']}{mark} | {sp['score']:.1f} | {_per_seed(a)} | {_per_seed(b)} | "
+            lines.append(f"| {sp['threshold']}{mark} | {sp['score']:.1f} | {_per_seed(a)}{bc_level.flag(a)} | "
+                         f"{_per_seed(b)}{bc_level.flag(b)} | "
                          f"{_speedup(sp['updates'], sp['reference_censored'] > 0)} | "
                          f"{_speedup(sp['seconds'], sp['reference_censored'] > 0)} |")
         lines += ["", f"Probability that {s['variant']} beats {ref['variant']}: final score "
@@ -334,5 +355,5 @@ def merge_runs(run_dirs: list[Path], out_dir: Path, behaviour: float | None = No
     atomic_write_text(out_dir / "config.json", study.record_json(previous=json.dumps({"runs": records})))
     write_curves(out_dir / "curves.csv", rows)
     atomic_write_text(out_dir / "summary.json", summary_json(summary))
-    plot_curves(out_dir / "curves.png", study, rows, ends)
+    plot_curves(out_dir / "curves.png", study, rows, ends, bc_level.figure_lines(summary))
     return summary
