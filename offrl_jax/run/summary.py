@@ -23,6 +23,7 @@ import numpy as np
 from offrl_jax.run import stats
 from offrl_jax.run.results import (
     all_nan_expected,
+    check_curve_algos,
     check_curve_seeds,
     plot_curves,
     pretrain_ends_of,
@@ -274,6 +275,7 @@ def resummarize(run_dir: Path, behaviour: float | None = None) -> list[dict]:
     study = Study.from_json((run_dir / "config.json").read_text())
     rows = read_curves(run_dir / "curves.csv")
     check_curve_seeds(run_dir / "curves.csv", rows, study.seeds)
+    check_curve_algos(run_dir / "curves.csv", rows, study)
     if (run_dir / "summary.json").is_file():
         try:
             saved = json.loads((run_dir / "summary.json").read_text())
@@ -315,6 +317,7 @@ def merge_runs(run_dirs: list[Path], out_dir: Path, behaviour: float | None = No
     for d, s in zip(run_dirs, studies):
         mine = read_curves(d / "curves.csv")
         check_curve_seeds(d / "curves.csv", mine, s.seeds)
+        check_curve_algos(d / "curves.csv", mine, s)
         short = short_curves(mine, {v.label: s.updates for v in s.variants})
         if short:
             raise ValueError(f"{d / 'curves.csv'}: ends before the run's {s.updates:,} updates ("
