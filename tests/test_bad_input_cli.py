@@ -167,7 +167,8 @@ def extended_and_stopped(run: Path) -> None:
     new budget, one variant has evaluations past the old one, summary.json is the 70k run's."""
     (run / "config.json").write_text((run / "config.json").read_text().replace('"updates": 70000', '"updates": 100000'))
     lines = (run / "curves.csv").read_text().splitlines(True)
-    more = [line.replace(",70000,", ",75000,") for line in lines if line.startswith("pretrained,") and ",70000," in line]
+    more = [line.replace(",70000,", ",75000,") for line in lines
+            if line.startswith("pretrained,") and ",70000," in line]
     (run / "curves.csv").write_text("".join(lines + more))
 
 

@@ -134,6 +134,62 @@ def test_overwrite_replaces_an_earlier_run_only_once_the_new_one_can_start(tmp_p
     assert (out / "summary.json").read_text() != "earlier" and not (out.parent / ".run.replaced").exists()
 
 
+FAR = ["--updates", "20000", "--eval-every", "10000", "--pretrain-updates", "10000"]  # a first checkpoint far off
+SHORT = [*TINY, "--updates", "200", "--pretrain-updates", "100", "--parallel", "1"]  # a finished run, soon
+
+
+def start_overwrite(tiny_hdf5, out: Path, **popen) -> subprocess.Popen:
+    """An --overwrite of the run in `out`, returned once it has moved that run aside and begun the new one (in one
+    process: the parent ignores Ctrl-C while it starts worker processes)."""
+    proc = subprocess.Popen([sys.executable, "-m", "experiments.mujoco_medium", "--dataset-path", str(tiny_hdf5),
+                             "--out", str(out), "--overwrite", *TINY, *FAR, "--parallel", "1"], cwd=ROOT, **popen)
+    deadline = time.time() + 300
+    while not ((out / "config.json").exists() and (out.parent / f".{out.name}.replaced").exists()):
+        assert time.time() < deadline and proc.poll() is None
+        time.sleep(0.02)
+    assert not any(out.rglob("*.msgpack"))
+    return proc
+
+
+def test_a_killed_overwrite_leaves_the_earlier_run_where_the_next_command_finds_it(tmp_path, tiny_hdf5):
+    """SIGKILL before the new run's first checkpoint: `report` names where the earlier run is, the next run command
+    on the directory gives it back (a --resume then has nothing of the new run to continue), and a second
+    --overwrite never deletes it unseen."""
+    out, aside = tmp_path / "run", tmp_path / ".run.replaced"
+    cli("--dataset-path", tiny_hdf5, "--out", out, *SHORT, check=True)
+    earlier = (out / "summary.json").read_text()
+    proc = start_overwrite(tiny_hdf5, out, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    proc.kill()
+    proc.wait()
+    result = run_module("experiments.report", str(out))
+    assert result.returncode == 2 and f"the run it was replacing is in {aside}" in result.stderr, result.stderr
+    result = cli("--resume", out, "--no-progress")
+    assert result.returncode == 2 and "the earlier run in" in result.stderr and "is given back" in result.stderr
+    assert result.stderr.strip().splitlines()[-1].startswith(f"error: {out}: the --overwrite that was replacing")
+    assert (out / "summary.json").read_text() == earlier and not aside.exists()
+    # the same state again, then an --overwrite whose data fails to load: the earlier run is back, not deleted
+    out.rename(aside)
+    out.mkdir()
+    (out / "config.json").write_text((aside / "config.json").read_text())
+    result = cli("--dataset-path", tmp_path / "missing.hdf5", "--out", out, "--overwrite", *TINY)
+    assert result.returncode == 2 and "is given back" in result.stderr, result.stderr
+    assert (out / "summary.json").read_text() == earlier and not aside.exists()
+
+
+def test_an_interrupted_overwrite_says_the_earlier_run_is_kept_not_resume(tmp_path, tiny_hdf5):
+    out = tmp_path / "run"
+    cli("--dataset-path", tiny_hdf5, "--out", out, *SHORT, check=True)
+    earlier = (out / "summary.json").read_text()
+    proc = start_overwrite(tiny_hdf5, out, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                           preexec_fn=terminal_sigint)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines()[-1] == (f"interrupted before the new run's first checkpoint; the earlier run in "
+                                            f"{out} is kept (the new one left nothing to resume)"), err
+    assert "resume with" not in err and (out / "summary.json").read_text() == earlier
+
+
 def test_kill_and_resume_equals_uninterrupted_run(tmp_path, tiny_hdf5):
     full, killed = tmp_path / "full", tmp_path / "killed"
     cli("--dataset-path", tiny_hdf5, "--out", full, *TINY, check=True, timeout=600)
@@ -279,6 +335,33 @@ def test_config_replays_a_saved_run_and_resume_refuses_other_settings(tmp_path, 
     cli("--dataset-path", tiny_hdf5, "--out", longer, *TINY[:1], "600", *TINY[2:], check=True, timeout=600)
     assert curves_without_time(first / "curves.csv") == curves_without_time(longer / "curves.csv")
     assert len(json.loads((first / "config.json").read_text())["runs"]) == 2  # the start and the extension
+
+
+def test_a_config_replay_is_exact_or_refused(tmp_path, tiny_hdf5):
+    """--config never trains variants under labels their values contradict (one value for a swept field), nor on
+    data other than the saved run's unless a data flag says so; both refusals come before anything is written."""
+    from offrl_jax.data import catalogue
+    from offrl_jax.run.study import Study, Variant
+
+    sweep = tuple(Variant.of(f"scratch actor_beta={b:g}", "rebrac", actor_beta=b, pretrain="none")
+                  for b in (0.001, 0.01))
+    study = Study(name="sweep", dataset=str(tiny_hdf5), env="hopper", variants=sweep, updates=400, eval_every=100)
+    saved = tmp_path / "sweep.json"
+    saved.write_text(study.record_json())
+    result = cli("--config", saved, "--out", tmp_path / "new", "--actor-beta", "0.5", timeout=120)
+    assert result.returncode == 2 and not (tmp_path / "new").exists(), result.stderr
+    assert result.stderr.strip().splitlines()[-1].startswith(
+        "error: --actor-beta: the saved run's variants differ in actor_beta (scratch actor_beta=0.001: 0.001, "
+        "scratch actor_beta=0.01: 0.01)"), result.stderr
+    # the data file changed since the run: its SHA-256 is not the one config.json recorded
+    study = Study(name="one", dataset=str(tiny_hdf5), env="hopper",
+                  variants=(Variant.of("scratch", "td3bc", pretrain="none"),), updates=400, eval_every=100,
+                  batch_size=32)
+    saved.write_text(study.record_json(catalogue.load(str(tiny_hdf5)), data_sha256="ab" * 32))
+    result = cli("--config", saved, "--out", tmp_path / "new", timeout=120)
+    assert result.returncode == 2 and not (tmp_path / "new").exists(), result.stderr
+    assert "not the data the saved run trained on (SHA-256" in result.stderr.strip().splitlines()[-1], result.stderr
+    assert f"say so with --dataset-path {tiny_hdf5}" in result.stderr
 
 
 def test_debug_variable_shows_the_traceback(tmp_path):

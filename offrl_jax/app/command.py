@@ -26,10 +26,18 @@ from collections.abc import Callable
 from pathlib import Path
 
 from offrl_jax.app.launch import check_backend, start_local_processes, start_processes, use_cpu_cores
-from offrl_jax.app.outputs import check_resume_dir, output_dir, saved_studies, studies_json
+from offrl_jax.app.outputs import (
+    check_resume_dir,
+    give_back_replaced,
+    has_checkpoint,
+    output_dir,
+    replaced_dir,
+    saved_studies,
+    studies_json,
+)
 from offrl_jax.data import catalogue
 from offrl_jax.data.dataset import DatasetError, rows_without_timeouts
-from offrl_jax.run.provenance import fingerprint
+from offrl_jax.run.provenance import fingerprint, recorded_data
 from offrl_jax.run.resume import check_resume, edited_resolved
 from offrl_jax.run.runner import Diverged, run_study
 from offrl_jax.run.study import Study, Variant
@@ -48,6 +56,9 @@ RUN_FIELDS = ("updates", "eval_every", "eval_episodes", "batch_size", "checkpoin
               "max_transitions", "clip_actions")
 REPLAY_FLAGS = frozenset({"config", "out", "overwrite", "parallel", "no_progress", "logger", "seeds", "seed_offset",
                           "dataset_path", *RUN_FIELDS, *PROCESS_FLAGS})
+
+
+DATA_FLAGS = frozenset({"dataset_path", "max_transitions", "clip_actions"})  # with --config: other data, knowingly
 
 
 def given_dests(parser: argparse.ArgumentParser, argv=None) -> set[str]:
@@ -86,6 +97,12 @@ def replay(saved: Study | list[Study], args, given: set[str], hparams: dict) -> 
         fields["dataset"] = str(args.dataset_path)
 
     def one(study: Study) -> Study:
+        for field in hparams:  # the variants were made to differ in it (a sweep, an ablation): their labels say so
+            values = {repr(dict(v.overrides).get(field, "(its default)")): v for v in study.variants}
+            if len(values) > 1:
+                raise UsageError(f"--{field.replace('_', '-')}: the saved run's variants differ in {field} ("
+                                 f"{', '.join(f'{v.label}: {k}' for k, v in values.items())}), so one value for all "
+                                 "would leave their labels false; start a new run to compare other values")
         variants = tuple(Variant.of(v.label, v.algo, **(dict(v.overrides) | hparams)) for v in study.variants)
         return dataclasses.replace(study, variants=variants, **fields)
 
@@ -119,6 +136,8 @@ class Command:
     lock: object = None
     local: object = None  # the other processes of a --processes run
     writer: bool = True  # this process writes the run (process 0 of a multi-process run)
+    given_back: bool = False  # the earlier run is back in `out`: the new one ended before its first checkpoint
+    saved_data: dict = dataclasses.field(default_factory=dict)  # --config: study -> the SHA-256 its data had
 
     @property
     def resuming(self) -> bool:
@@ -143,6 +162,14 @@ class Command:
         if self.resuming and args.config is not None:
             raise UsageError("--resume and --config exclude each other: --resume continues a run in place, "
                              "--config starts a new one from its settings")
+        named = args.resume if self.resuming else args.out
+        if named is not None and replaced_dir(named).is_dir():  # an --overwrite of it was killed: finish its work
+            new_run = has_checkpoint(named)
+            give_back_replaced(named)
+            if self.resuming and not new_run:
+                raise UsageError(f"{named}: the --overwrite that was replacing this run stopped before its first "
+                                 f"checkpoint, so nothing of it can be resumed; the earlier run is back in {named} "
+                                 "(--overwrite starts the new run again, --resume continues the earlier one)")
         if self.resuming:
             check_resume_dir(args.resume)
         if self.resuming and given - RESUME_FLAGS:
@@ -167,6 +194,8 @@ class Command:
                 if own.is_file() and (edited := edited_resolved(study, own)):
                     raise UsageError(f"{edited}; the `resolved` section is a record, not read: change a value with "
                                      f"its flag (--config {path} --FLAG VALUE)")
+                if own.is_file() and (sha := recorded_data(own)):
+                    self.saved_data[study.name] = sha
             self.built = replay(saved, args, given, typed)
         elif not self.resuming:
             # validates every hyper-parameter and budget; `typed`: the flags typed, a default value typed included
@@ -225,11 +254,23 @@ class Command:
         if "updates" in self.given and isinstance(self.built, list) and self.writer:
             atomic_write_text(self.out / "config.json", studies_json(self.built))
 
+    def check_replay(self, shas: list[str]) -> None:
+        """--config re-runs a run exactly: on the data it trained on, unless a flag given with it changes the data."""
+        if self.args.config is None or self.given & DATA_FLAGS:
+            return
+        for study, sha in zip(self.studies, shas):
+            if self.saved_data.get(study.name, sha) != sha:
+                raise UsageError(f"{study.dataset}: not the data the saved run trained on (SHA-256 {sha[:12]}..., "
+                                 f"recorded {self.saved_data[study.name][:12]}...); --config re-runs a run exactly: "
+                                 f"to train on the data as it is now, say so with --dataset-path {study.dataset}")
+
     # 6. run
     def run(self, data: list, shas: list[str]) -> None:
         if self.replace:  # moved aside, not deleted: a new run that fails before its first checkpoint gives it back
-            self.replaced = self.out.with_name(f".{self.out.name}.replaced")
-            shutil.rmtree(self.replaced, ignore_errors=True)
+            aside = replaced_dir(self.out)
+            if aside.exists():  # `read` gave back or removed what a killed --overwrite left there
+                raise UsageError(f"{aside} exists: it may hold an earlier run; move it away first")
+            self.replaced = aside
             self.out.rename(self.replaced)
         if isinstance(self.built, list) and not self.resuming and self.writer:
             self.out.mkdir(parents=True, exist_ok=True)  # the whole studies, so --resume can start those not begun
@@ -246,7 +287,7 @@ class Command:
                 print(f"results: {where}/summary.json, curves.csv, curves.png", file=sys.stderr)
 
     # 7. clean up
-    def clean_up(self, ok: bool) -> str | None:
+    def clean_up(self, ok: bool, interrupted: bool = False) -> str | None:
         """Everything the command holds given back; returns the failure of another process, if one failed."""
         failed = self.local.close(ok) if self.local is not None else None
         out, args = self.out, self.args
@@ -256,8 +297,10 @@ class Command:
             else:
                 shutil.rmtree(out, ignore_errors=True)
                 self.replaced.rename(out)
-                print(f"the earlier run in {out} is kept: the new one ended before its first checkpoint",
-                      file=sys.stderr)
+                self.given_back = True
+                if not interrupted:  # the interruption's own line says it
+                    print(f"the earlier run in {out} is kept: the new one ended before its first checkpoint",
+                          file=sys.stderr)
         claimed = out is not None and args.resume is None and args.out is None  # runs/<study>/<timestamp>
         if claimed and out.is_dir() and not any(out.iterdir()):  # it got nothing (the data failed to load)
             out.rmdir()
@@ -278,6 +321,18 @@ class Command:
         return failed
 
 
+def interrupted_line(command: Command) -> str:
+    """What an interrupted command says: how to resume the run it leaves, or that the earlier run is back."""
+    out = command.out
+    if command.given_back:
+        return (f"interrupted before the new run's first checkpoint; the earlier run in {out} is kept (the new one "
+                "left nothing to resume)")
+    display = " --no-progress" if getattr(command.args, "no_progress", False) else ""
+    where = (f"; resume with --resume {shlex.quote(str(out))}{display}"
+             if out is not None and (out / "config.json").is_file() else "")
+    return f"interrupted{where}"
+
+
 def run_command(build: Build, parser: argparse.ArgumentParser, argv=None,
                 hparams: Callable[[argparse.Namespace], dict] | None = None,
                 hparam_dests: frozenset[str] = frozenset()) -> int:
@@ -287,13 +342,14 @@ def run_command(build: Build, parser: argparse.ArgumentParser, argv=None,
     they make ({config field: value}, None for a flag not given)."""
     command = Command(parser.parse_args(argv), parser, argv)
     one_line_warnings()
-    ok, code = False, 1
+    ok, interrupted, code = False, False, 1
     try:
         command.read(build, hparams, hparam_dests)
         command.start_processes()
         command.claim_output()
         data = command.load()
         shas = [fingerprint(ds) for ds in data]
+        command.check_replay(shas)
         command.check_resume(data, shas)
         command.run(data, shas)
         ok = True
@@ -304,16 +360,13 @@ def run_command(build: Build, parser: argparse.ArgumentParser, argv=None,
         code = 3 if isinstance(e, Diverged) else 2
         return code
     except KeyboardInterrupt:
-        out = command.out
-        display = " --no-progress" if getattr(command.args, "no_progress", False) else ""
-        where = (f"; resume with --resume {shlex.quote(str(out))}{display}"
-                 if out is not None and (out / "config.json").is_file() else "")
-        print(f"interrupted{where}", file=sys.stderr)
-        code = 130
+        interrupted, code = True, 130
         return code
     finally:
         with shielded():  # the results are written, or the run is ending: its clean-up is not cut half-way
-            failed = command.clean_up(ok)
+            failed = command.clean_up(ok, interrupted)
+        if interrupted:  # said once the clean-up has made it true
+            print(interrupted_line(command), file=sys.stderr)
         if command.local is not None and not ok:  # leave now: JAX's exit handler would wait for the processes
             sys.stdout.flush()
             sys.stderr.flush()
