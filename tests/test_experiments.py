@@ -54,6 +54,8 @@ def curves_without_time(path: Path) -> list[dict]:
     (["--resume", "/nonexistent/run"], "nothing to resume"),
     (["--updates", "5000"], "pre-training updates (10000) exceed the total budget (5000)"),
     (["--updates", "20000", "--eval-every", "1001"], "must be multiples of 2"),  # TD3's 2-update call grid
+    (["--level", "expert", "--dataset-path", "x.hdf5"], "--level names a generated dataset"),  # else ignored
+    (["--pretrain-auto-window", "2000"], "--pretrain-auto-window applies only to --pretrain-updates auto"),
 ])
 def test_bad_input_is_one_line_and_writes_nothing(tmp_path, args, message):
     out = tmp_path / "out"
@@ -234,7 +236,8 @@ def test_sigterm_is_a_stop_with_the_resume_command(tmp_path, tiny_hdf5, backgrou
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 143, err
-    assert f"interrupted; resume with --resume {stopped} --no-progress\n" in err and "Traceback" not in err
+    parallel = "" if background else " --parallel 1"  # a resume keeps the run's --parallel
+    assert f"interrupted; resume with --resume {stopped} --no-progress{parallel}\n" in err and "Traceback" not in err
     assert ("\n" + err).count("\ninterrupted; resume") == 1, err  # on a line of its own, not on the progress bar's
 
 
@@ -362,6 +365,25 @@ def test_a_config_replay_is_exact_or_refused(tmp_path, tiny_hdf5):
     assert result.returncode == 2 and not (tmp_path / "new").exists(), result.stderr
     assert "not the data the saved run trained on (SHA-256" in result.stderr.strip().splitlines()[-1], result.stderr
     assert f"say so with --dataset-path {tiny_hdf5}" in result.stderr
+
+
+def test_a_resume_keeps_the_runs_parallel(tmp_path, tiny_hdf5):
+    """Variants side by side (one core each) or one after another (sharing the cores) round differently, so a
+    resume with another --parallel is refused like any other changed setting, before anything is written."""
+    from offrl_jax.data import catalogue
+    from offrl_jax.run.study import Study, Variant
+
+    run = tmp_path / "run"
+    run.mkdir()
+    study = Study(name="two", dataset=str(tiny_hdf5), env="hopper", updates=400, eval_every=100, batch_size=32,
+                  variants=(Variant.of("a", "td3bc", pretrain="none"), Variant.of("b", "td3bc", pretrain="none",
+                                                                                    hidden=(32, 32))))
+    (run / "config.json").write_text(study.record_json(catalogue.load(str(tiny_hdf5))))  # started with the default
+    before = (run / "config.json").read_text()
+    result = cli("--resume", run, "--parallel", "1", timeout=120)
+    assert result.returncode == 2 and (run / "config.json").read_text() == before, result.stderr
+    assert result.stderr.strip().splitlines()[-1].endswith("it ran with --parallel 2, and --parallel 1 would train "
+                                                           "the rest differently (rounding); resume with --parallel 2")
 
 
 def test_debug_variable_shows_the_traceback(tmp_path):

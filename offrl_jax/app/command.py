@@ -37,7 +37,7 @@ from offrl_jax.app.outputs import (
 )
 from offrl_jax.data import catalogue
 from offrl_jax.data.dataset import DatasetError, rows_without_timeouts
-from offrl_jax.run.provenance import fingerprint, recorded_data
+from offrl_jax.run.provenance import fingerprint, recorded_command, recorded_data
 from offrl_jax.run.resume import check_resume, edited_resolved
 from offrl_jax.run.runner import Diverged, run_study
 from offrl_jax.run.study import Study, Variant
@@ -248,6 +248,13 @@ class Command:
     def check_resume(self, data: list, shas: list[str]) -> None:
         if not self.resuming:
             return
+        for study in self.studies:  # variants one after another or side by side round differently: not mixed
+            groups = len(study.groups())
+            saved = recorded_parallel(self.study_dir(study) / "config.json", self.parser.get_default("parallel"))
+            if saved is not None and min(saved, groups) != min(self.args.parallel, groups):
+                raise UsageError(f"--resume continues {self.out} with its saved settings: it ran with --parallel "
+                                 f"{saved}, and --parallel {self.args.parallel} would train the rest differently "
+                                 f"(rounding); resume with --parallel {saved}")
         for study, ds, sha in zip(self.studies, data, shas):
             if self.study_dir(study).is_dir():  # a study of a multi-study run not begun yet has none
                 check_resume(study, self.study_dir(study), ds, sha)
@@ -321,6 +328,19 @@ class Command:
         return failed
 
 
+def recorded_parallel(config_path: Path, default: int) -> int | None:
+    """The --parallel of a run's last start or resume (`default` where it was not given; None: not recorded)."""
+    words = recorded_command(config_path)
+    if words is None:
+        return None
+    value = next((w.split("=", 1)[1] if "=" in w else nxt for w, nxt in zip(words, words[1:] + [""])
+                  if w == "--parallel" or w.startswith("--parallel=")), None)
+    try:
+        return default if value is None else int(value)
+    except ValueError:
+        return None
+
+
 def interrupted_line(command: Command) -> str:
     """What an interrupted command says: how to resume the run it leaves, or that the earlier run is back."""
     out = command.out
@@ -328,6 +348,8 @@ def interrupted_line(command: Command) -> str:
         return (f"interrupted before the new run's first checkpoint; the earlier run in {out} is kept (the new one "
                 "left nothing to resume)")
     display = " --no-progress" if getattr(command.args, "no_progress", False) else ""
+    if (parallel := getattr(command.args, "parallel", None)) != command.parser.get_default("parallel"):
+        display += f" --parallel {parallel}"  # a resume keeps it (`Command.check_resume`)
     where = (f"; resume with --resume {shlex.quote(str(out))}{display}"
              if out is not None and (out / "config.json").is_file() else "")
     return f"interrupted{where}"

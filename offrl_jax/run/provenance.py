@@ -101,3 +101,12 @@ def recorded_data(config_path) -> str | None:
                      and isinstance(r["dataset"].get("sha256"), str)), None)
     except (ValueError, AttributeError, TypeError, OSError):
         return None
+
+
+def recorded_command(config_path) -> list[str] | None:
+    """The command line of a run's last start or resume, as its config.json recorded it (None where none was)."""
+    try:
+        runs = json.loads(config_path.read_text()).get("runs", [])
+        return shlex.split(runs[-1]["command"]) if runs and isinstance(runs[-1].get("command"), str) else None
+    except (ValueError, AttributeError, TypeError, OSError, KeyError):
+        return None
