@@ -41,7 +41,7 @@ from offrl_jax.run.aggregate import aggregate, aggregate_table, arms, claims_tab
 from offrl_jax.run.figures import behaviour_score, plot_studies
 from offrl_jax.run.results import check_curve_algos, check_curve_seeds, read_curves, short_curves
 from offrl_jax.run.study import Study
-from offrl_jax.run.summary import merge_runs, resummarize, summary_table as table
+from offrl_jax.run.summary import merge_runs, merged_differences, resummarize, summary_table as table
 from offrl_jax.system.cli import OneLineParser, being_written, check_writable_dir, check_writable_file, print_error
 
 
@@ -229,6 +229,9 @@ def main(argv=None) -> int:
                 raise FileExistsError(f"{args.merge} {what}; merge into a new directory")
             check_writable_dir(args.merge)
             merge_runs(args.dirs, args.merge)
+            if differ := merged_differences([Study.from_json((d / "config.json").read_text()) for d in args.dirs]):
+                print(f"warning: the merged variants differ in more than their pre-training: {'; '.join(differ)}",
+                      file=sys.stderr)
             args.dirs = [args.merge]
             listed = listed_studies(args.dirs)
         study_dirs, found = [], []  # every study whose summary made a table: what --plot and the aggregate take

@@ -286,6 +286,22 @@ def resummarize(run_dir: Path, behaviour: float | None = None) -> list[dict]:
     return summarize(study, rows, pretrain_ends_of(rows), behaviour)
 
 
+def merged_differences(studies: list[Study]) -> list[str]:
+    """Hyper-parameters in which variants of one algorithm from different runs differ, besides their pre-training
+    (what the merged study compares): "field (label: value, ...)" each, for `merge_runs`'s caller to say."""
+    found = []
+    variants = [(i, v.algo, v.label, s.resolved()[v.label]) for i, s in enumerate(studies) for v in s.variants]
+    for algo in dict.fromkeys(a for _, a, _, _ in variants):
+        mine = [(i, label, config) for i, a, label, config in variants if a == algo]
+        if len({i for i, _, _ in mine}) < 2:
+            continue
+        for field in mine[0][2]:
+            values = {label: config.get(field) for _, label, config in mine}
+            if "pretrain" not in field and len({repr(v) for v in values.values()}) > 1:
+                found.append(f"{field} ({', '.join(f'{label}: {v}' for label, v in values.items())})")
+    return found
+
+
 def merge_runs(run_dirs: list[Path], out_dir: Path, behaviour: float | None = None) -> list[dict]:
     """One study from runs of it that each trained some of its variants (say one process per variant on a GPU):
     their variants and curves side by side in `out_dir` (config.json, curves.csv, summary.json, curves.png),
