@@ -31,6 +31,7 @@ in one panel with `--overlay` (`offrl_jax.run.figures`):
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 from collections import defaultdict
@@ -39,9 +40,9 @@ from pathlib import Path
 from offrl_jax.app.outputs import RUN_FILES, replaced_dir
 from offrl_jax.run.aggregate import aggregate, aggregate_table, arms, claims_table, plot_aggregate
 from offrl_jax.run.figures import behaviour_score, plot_studies
-from offrl_jax.run.results import check_curve_algos, check_curve_seeds, read_curves, short_curves
+from offrl_jax.run.results import check_curve_algos, check_curve_seeds, pretrain_ends_of, read_curves, short_curves
 from offrl_jax.run.study import Study
-from offrl_jax.run.summary import merge_runs, merged_differences, resummarize, summary_table as table
+from offrl_jax.run.summary import merge_runs, merged_differences, resummarize, summarize, summary_table as table
 from offrl_jax.system.cli import OneLineParser, being_written, check_writable_dir, check_writable_file, print_error
 
 
@@ -97,12 +98,13 @@ def read_summary(path: Path) -> list[dict]:
     return summary
 
 
-def check_run(path: Path, summary: list[dict]) -> None:
+def check_run(path: Path, summary: list[dict]) -> str | None:
     """Refuse (ValueError, one line) a summary.json that its run's other files contradict: a config.json that is not
     a saved study or lacks the summary's variants or seeds, a curves.csv that is cut or edited (`read_curves`),
-    holds variants of another run, or ends before the summary's budget.  A summary may cover some of the study's
-    variants (a run stopped and summarised early); a summary.json alone (copied out of its run) is reported as it
-    is."""
+    holds variants of another run, or ends before the summary's budget, or, for a partial run (its curves end
+    before config.json's budget), runs past it.  A summary may cover some of the study's variants (a run stopped
+    and summarised where it stopped): returned is what makes such a run partial, for its heading.  A summary.json
+    alone (copied out of its run) is reported as it is."""
     run = path.parent
     variants = {s["variant"] for s in summary}
     known = variants
@@ -136,14 +138,24 @@ def check_run(path: Path, summary: list[dict]) -> None:
             raise ValueError(f"{run / 'curves.csv'}: {variant}'s evaluations end at update {last}, before the "
                              f"{budgets[variant]} updates of {path} (a truncated file?)")
         if (run / "config.json").is_file() and (partial := short_curves(rows, dict.fromkeys(known, study.updates))):
-            # a run stopped while it was being extended (--resume --updates N): summary.json is the shorter run's
             where = ", ".join(f"{label} {'has no evaluation' if u is None else f'stopped at update {u:,}'}"
                               for label, u in sorted(partial.items()))
-            raise ValueError(f"{run} is a partial run: {where}, of the {study.updates:,} updates in its config.json "
-                             f"(--resume {run} finishes it); its summary.json is of an earlier, shorter run")
+            if any(last is not None and last > budgets[label] for label, last in _last(rows, budgets).items()):
+                # evaluations past the summary's budget: a run stopped while --resume --updates N extended it
+                raise ValueError(f"{run} is a partial run: {where}, of the {study.updates:,} updates in its "
+                                 f"config.json (--resume {run} finishes it); its summary.json is of an earlier, "
+                                 "shorter run")
+            return f"partial: {where}, of {study.updates:,}; reported at the summary's budget"
+    return None
 
 
-def current(path: Path, summary: list[dict], reference: bool = True) -> list[dict]:
+def _last(rows: list[dict], budgets: dict[str, int]) -> dict[str, int | None]:
+    """Each variant's last evaluated update in curves.csv `rows`."""
+    return {label: max((r["update"] for r in rows if r.get("variant") == label and "update" in r), default=None)
+            for label in budgets}
+
+
+def current(path: Path, summary: list[dict], reference: bool = True, partial: bool = False) -> list[dict]:
     """The summary with today's statistics: recomputed from the run's config.json and curves.csv where both are
     there (the behaviour score as the run recorded it, else from the cached dataset), else summary.json as it is,
     if it has them (a summary.json copied out of its run)."""
@@ -152,6 +164,13 @@ def current(path: Path, summary: list[dict], reference: bool = True) -> list[dic
         known = next((s["behaviour_score"] for s in summary if s.get("behaviour_score") is not None), None)
         if known is None and reference:
             known = behaviour_score(summary[0].get("dataset", ""))
+        if partial:  # the variants and budget the summary was made for, not config.json's
+            study, labels = Study.from_json((run / "config.json").read_text()), [s["variant"] for s in summary]
+            study = dataclasses.replace(study, updates=max(s["updates"] for s in summary),
+                                        variants=tuple(v for v in study.variants if v.label in labels),
+                                        reference=study.reference if study.reference in labels else None)
+            rows = [r for r in read_curves(run / "curves.csv") if r.get("variant") in labels]
+            return summarize(study, rows, pretrain_ends_of(rows), known)
         return resummarize(run, known)
     if not all("final_iqm" in s for s in summary):
         raise ValueError(f"{path}: written before the interval statistics, and without its run's config.json and "
@@ -238,12 +257,12 @@ def main(argv=None) -> int:
         for path in listed:
             try:
                 summary = read_summary(path)
-                check_run(path, summary)
-                summary = current(path, summary, reference=not args.no_reference)
+                partial = check_run(path, summary)
+                summary = current(path, summary, reference=not args.no_reference, partial=partial is not None)
                 text = table(summary)
             except (KeyError, TypeError, IndexError) as e:
                 raise ValueError(f"{path}: not a run's summary (missing or empty {e})") from None
-            print(f"### {path.parent}\n\n{text}\n")
+            print(f"### {path.parent}" + (f" ({partial})" if partial else "") + f"\n\n{text}\n")
             if args.curves:
                 if not (path.parent / "curves.csv").is_file():
                     raise FileNotFoundError(f"{path.parent}: no curves.csv, which --curves reads")

@@ -262,3 +262,16 @@ def test_report_refuses_a_run_being_written_or_half_replaced(tmp_path, capsys):
     assert main([str(run)]) == 2
     out, err = capsys.readouterr()
     assert not out and f"the run it was replacing is in {aside}" in err, err
+
+
+def test_report_says_a_run_is_partial_and_reports_it_at_the_budget_its_summary_was_made_for(capsys):
+    """A run stopped on purpose and summarised where it stopped (one arm, 14k of 16k updates): its heading says so,
+    and its numbers are labelled with the 14k they were measured at, not config.json's 16k."""
+    from experiments.report import main
+
+    run = RUN.parents[1] / "figure2" / "hopper-edac-critic9k"
+    assert main([str(run), "--no-reference"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith(f"### {run} (partial: pretrained stopped at update 14,000, scratch has no evaluation, of "
+                          "16,000; reported at the summary's budget)\n"), out
+    assert "2 seeds, 14,000 updates per variant" in out and "16,000" not in out.split("\n", 1)[1]
