@@ -370,6 +370,8 @@ def test_a_config_replay_is_exact_or_refused(tmp_path, tiny_hdf5):
 def test_a_resume_keeps_the_runs_parallel(tmp_path, tiny_hdf5):
     """Variants side by side (one core each) or one after another (sharing the cores) round differently, so a
     resume with another --parallel is refused like any other changed setting, before anything is written."""
+    import json
+
     from offrl_jax.data import catalogue
     from offrl_jax.run.study import Study, Variant
 
@@ -378,12 +380,17 @@ def test_a_resume_keeps_the_runs_parallel(tmp_path, tiny_hdf5):
     study = Study(name="two", dataset=str(tiny_hdf5), env="hopper", updates=400, eval_every=100, batch_size=32,
                   variants=(Variant.of("a", "td3bc", pretrain="none"), Variant.of("b", "td3bc", pretrain="none",
                                                                                     hidden=(32, 32))))
-    (run / "config.json").write_text(study.record_json(catalogue.load(str(tiny_hdf5))))  # started with the default
-    before = (run / "config.json").read_text()
-    result = cli("--resume", run, "--parallel", "1", timeout=120)
-    assert result.returncode == 2 and (run / "config.json").read_text() == before, result.stderr
-    assert result.stderr.strip().splitlines()[-1].endswith("it ran with --parallel 2, and --parallel 1 would train "
-                                                           "the rest differently (rounding); resume with --parallel 2")
+    record = json.loads(study.record_json(catalogue.load(str(tiny_hdf5))))
+    for command, saved, given in (("", "2", ["--parallel", "1"]), (" --parallel 1", "1", [])):
+        record["runs"][-1]["command"] = f"python -m experiments.mujoco_medium --out {run}{command}"
+        (run / "config.json").write_text(json.dumps(record))
+        before = (run / "config.json").read_text()
+        result = cli("--resume", run, *given, timeout=120)
+        assert result.returncode == 2 and (run / "config.json").read_text() == before, result.stderr
+        now = given[1] if given else "2"
+        assert result.stderr.strip().splitlines()[-1].endswith(
+            f"it ran with --parallel {saved}, and --parallel {now} would train the rest differently (rounding); "
+            f"resume with --parallel {saved}"), result.stderr
 
 
 def test_debug_variable_shows_the_traceback(tmp_path):

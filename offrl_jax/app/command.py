@@ -250,7 +250,8 @@ class Command:
             return
         for study in self.studies:  # variants one after another or side by side round differently: not mixed
             groups = len(study.groups())
-            saved = recorded_parallel(self.study_dir(study) / "config.json", self.parser.get_default("parallel"))
+            saved = recorded_parallel(self.study_dir(study) / "config.json", self.parser.prog,
+                                      self.parser.get_default("parallel"))
             if saved is not None and min(saved, groups) != min(self.args.parallel, groups):
                 raise UsageError(f"--resume continues {self.out} with its saved settings: it ran with --parallel "
                                  f"{saved}, and --parallel {self.args.parallel} would train the rest differently "
@@ -328,10 +329,11 @@ class Command:
         return failed
 
 
-def recorded_parallel(config_path: Path, default: int) -> int | None:
-    """The --parallel of a run's last start or resume (`default` where it was not given; None: not recorded)."""
+def recorded_parallel(config_path: Path, prog: str, default: int) -> int | None:
+    """The --parallel of a run's last start or resume by command `prog` (`default` where it was not given; None:
+    not recorded, or started otherwise, say by `run_study` from Python)."""
     words = recorded_command(config_path)
-    if words is None:
+    if words is None or words[1:3] != ["-m", prog]:
         return None
     value = next((w.split("=", 1)[1] if "=" in w else nxt for w, nxt in zip(words, words[1:] + [""])
                   if w == "--parallel" or w.startswith("--parallel=")), None)
