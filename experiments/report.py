@@ -231,6 +231,8 @@ def main(argv=None) -> int:
                 raise ValueError("--aggregate: the studies have no variant in common, so nothing to aggregate ("
                                  + "; ".join(f"{path.parent}: {', '.join(v)}" for path, v in zip(listed, variants))
                                  + ")")
+        if args.plot is not None and args.aggregate is not None and args.plot.resolve() == args.aggregate.resolve():
+            raise ValueError(f"--plot and --aggregate both name {args.plot}: the second figure would replace the first")
         for flag, fig in (("--plot", args.plot), ("--aggregate", args.aggregate)):
             if fig is not None:
                 if fig.suffix.lower() != ".png":

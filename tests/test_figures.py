@@ -119,3 +119,6 @@ def test_aggregate_refuses_studies_without_a_variant_in_common_and_a_runs_own_fi
                         "--no-reference"]) == 2
     out, err = capsys.readouterr()
     assert not out and "is a run's own file" in err and (run / "curves.png").read_bytes() == before, err
+    assert report.main([str(RUNS[0]), str(RUNS[1]), "--plot", str(figure), "--aggregate", str(figure),
+                        "--no-reference"]) == 2
+    assert "--plot and --aggregate both name" in capsys.readouterr().err and not figure.exists()

@@ -1,11 +1,12 @@
 """What `python -m experiments.<name>` does, as named steps: `run_command(build, parser, argv)`.
 
     1. read the command      flags checked; the study (or studies) built, replayed from --config, or read back for
-                             --resume
+                             --resume; what a killed --overwrite of the directory left aside given back
     2. start the processes   this process's CPU cores, a multi-process run's others (`offrl_jax.app.launch`)
     3. claim the output      the run directory chosen (`offrl_jax.app.outputs`), checked writable and locked
     4. load the data         every dataset once, before anything is written; bad data fails here
-    5. check a resume        every checkpoint belongs to its study, data and settings (`offrl_jax.run.resume`)
+    5. check a resume        every checkpoint belongs to its study, data and settings (`offrl_jax.run.resume`),
+                             --parallel too; a --config replay's data is the saved run's
     6. run                   each study into its directory (`offrl_jax.run.runner.run_study`), its table printed
     7. clean up              an --overwrite'd earlier run deleted, or given back if the new one has no checkpoint
                              yet; a claimed directory that got nothing removed; the lock released
@@ -29,7 +30,6 @@ from offrl_jax.app.launch import check_backend, start_local_processes, start_pro
 from offrl_jax.app.outputs import (
     check_resume_dir,
     give_back_replaced,
-    has_checkpoint,
     output_dir,
     replaced_dir,
     saved_studies,
@@ -137,6 +137,7 @@ class Command:
     local: object = None  # the other processes of a --processes run
     writer: bool = True  # this process writes the run (process 0 of a multi-process run)
     given_back: bool = False  # the earlier run is back in `out`: the new one ended before its first checkpoint
+    interrupted: bool = False  # by Ctrl-C or SIGTERM
     saved_data: dict = dataclasses.field(default_factory=dict)  # --config: study -> the SHA-256 its data had
 
     @property
@@ -164,9 +165,7 @@ class Command:
                              "--config starts a new one from its settings")
         named = args.resume if self.resuming else args.out
         if named is not None and replaced_dir(named).is_dir():  # an --overwrite of it was killed: finish its work
-            new_run = has_checkpoint(named)
-            give_back_replaced(named)
-            if self.resuming and not new_run:
+            if give_back_replaced(named) and self.resuming:
                 raise UsageError(f"{named}: the --overwrite that was replacing this run stopped before its first "
                                  f"checkpoint, so nothing of it can be resumed; the earlier run is back in {named} "
                                  "(--overwrite starts the new run again, --resume continues the earlier one)")
@@ -244,8 +243,9 @@ class Command:
                                      f"{study.batch_size}; keep them with --timeouts bootstrap or stop{lower}")
         return data
 
-    # 5. check a resume: every study's checkpoints must be its own, before anything is written
+    # 5. check a resume (every study's checkpoints must be its own) or a replay, before anything is written
     def check_resume(self, data: list, shas: list[str]) -> None:
+        self.check_replay(shas)
         if not self.resuming:
             return
         for study in self.studies:  # variants one after another or side by side round differently: not mixed
@@ -295,7 +295,7 @@ class Command:
                 print(f"results: {where}/summary.json, curves.csv, curves.png", file=sys.stderr)
 
     # 7. clean up
-    def clean_up(self, ok: bool, interrupted: bool = False) -> str | None:
+    def clean_up(self, ok: bool) -> str | None:
         """Everything the command holds given back; returns the failure of another process, if one failed."""
         failed = self.local.close(ok) if self.local is not None else None
         out, args = self.out, self.args
@@ -306,7 +306,7 @@ class Command:
                 shutil.rmtree(out, ignore_errors=True)
                 self.replaced.rename(out)
                 self.given_back = True
-                if not interrupted:  # the interruption's own line says it
+                if not self.interrupted:  # the interruption's own line says it
                     print(f"the earlier run in {out} is kept: the new one ended before its first checkpoint",
                           file=sys.stderr)
         claimed = out is not None and args.resume is None and args.out is None  # runs/<study>/<timestamp>
@@ -366,14 +366,13 @@ def run_command(build: Build, parser: argparse.ArgumentParser, argv=None,
     they make ({config field: value}, None for a flag not given)."""
     command = Command(parser.parse_args(argv), parser, argv)
     one_line_warnings()
-    ok, interrupted, code = False, False, 1
+    ok, code = False, 1
     try:
         command.read(build, hparams, hparam_dests)
         command.start_processes()
         command.claim_output()
         data = command.load()
         shas = [fingerprint(ds) for ds in data]
-        command.check_replay(shas)
         command.check_resume(data, shas)
         command.run(data, shas)
         ok = True
@@ -384,12 +383,12 @@ def run_command(build: Build, parser: argparse.ArgumentParser, argv=None,
         code = 3 if isinstance(e, Diverged) else 2
         return code
     except KeyboardInterrupt:
-        interrupted, code = True, 130
+        command.interrupted, code = True, 130
         return code
     finally:
         with shielded():  # the results are written, or the run is ending: its clean-up is not cut half-way
-            failed = command.clean_up(ok, interrupted)
-        if interrupted:  # said once the clean-up has made it true
+            failed = command.clean_up(ok)
+        if command.interrupted:  # said once the clean-up has made it true
             print(interrupted_line(command), file=sys.stderr)
         if command.local is not None and not ok:  # leave now: JAX's exit handler would wait for the processes
             sys.stdout.flush()

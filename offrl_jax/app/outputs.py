@@ -64,25 +64,26 @@ def has_checkpoint(out: Path) -> bool:
     return out.is_dir() and any(out.rglob("*.msgpack"))
 
 
-def give_back_replaced(out: Path) -> None:
+def give_back_replaced(out: Path) -> bool:
     """Finish the work of an --overwrite of `out` that was killed (nothing else leaves `replaced_dir(out)` behind):
-    the earlier run is given back if the new one had no checkpoint yet, and otherwise removed, as that command would
-    have done; either is said on stderr.  Nothing happens while another process holds `out`'s lock."""
+    the earlier run is given back if the new one had no checkpoint yet (True is returned), and otherwise removed, as
+    that command would have done; either is said on stderr.  Nothing happens while another process holds `out`'s
+    lock."""
     aside = replaced_dir(out)
     if not aside.is_dir():
-        return
+        return False
     try:
         lock = lock_run_dir(out)
     except OSError:  # the --overwrite is still running: its own clean-up decides
-        return
+        return False
     try:
         if not aside.is_dir():
-            return
+            return False
         if has_checkpoint(out):
             shutil.rmtree(aside)
             print(f"removed {aside}: the run that an interrupted --overwrite of {out} replaced (the new run there "
                   "has its checkpoints)", file=sys.stderr)
-            return
+            return False
         if out.exists():
             try:
                 new = saved_studies(out)
@@ -97,6 +98,7 @@ def give_back_replaced(out: Path) -> None:
         aside.rename(out)
         print(f"the earlier run in {out} is given back: an --overwrite of it was stopped before the new run's first "
               "checkpoint", file=sys.stderr)
+        return True
     finally:
         Path(lock.name).unlink(missing_ok=True)
         lock.close()
