@@ -393,6 +393,26 @@ def test_a_resume_keeps_the_runs_parallel(tmp_path, tiny_hdf5):
             f"resume with --parallel {saved}"), result.stderr
 
 
+def test_a_config_replay_keeps_the_saved_runs_parallel_unless_given(tmp_path, tiny_hdf5):
+    import json
+
+    from experiments.mujoco_medium import make_parser
+    from offrl_jax.app.command import Command
+    from offrl_jax.app.studies import HPARAM_DESTS, given
+    from offrl_jax.run.study import Study, Variant
+
+    study = Study(name="one", dataset=str(tiny_hdf5), env="hopper", updates=400, eval_every=100, batch_size=32,
+                  variants=(Variant.of("scratch", "td3bc", pretrain="none"),))
+    record = json.loads(study.record_json())
+    record["runs"][-1]["command"] = "python -m experiments.mujoco_medium --parallel 1"
+    (tmp_path / "config.json").write_text(json.dumps(record))
+    for argv, parallel in (([], 1), (["--parallel", "2"], 2)):
+        argv = ["--config", str(tmp_path / "config.json"), "--out", str(tmp_path / "new"), *argv]
+        command = Command(make_parser().parse_args(argv), make_parser(), argv)
+        command.read(None, given, HPARAM_DESTS)
+        assert command.args.parallel == parallel
+
+
 def test_debug_variable_shows_the_traceback(tmp_path):
     result = cli("--lam", "1.5", "--out", tmp_path / "x", timeout=120)
     assert result.returncode == 2 and "Traceback" not in result.stderr

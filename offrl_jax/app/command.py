@@ -195,6 +195,9 @@ class Command:
                                      f"its flag (--config {path} --FLAG VALUE)")
                 if own.is_file() and (sha := recorded_data(own)):
                     self.saved_data[study.name] = sha
+                saved_parallel = recorded_parallel(own, self.parser.prog, self.parser.get_default("parallel"))
+                if "parallel" not in given and saved_parallel is not None:  # as it ran: the same rounding
+                    args.parallel = saved_parallel
             self.built = replay(saved, args, given, typed)
         elif not self.resuming:
             # validates every hyper-parameter and budget; `typed`: the flags typed, a default value typed included
