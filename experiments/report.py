@@ -32,17 +32,19 @@ in one panel with `--overlay` (`offrl_jax.run.figures`):
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 from collections import defaultdict
 from pathlib import Path
 
+from offrl_jax.app.outputs import RUN_FILES, replaced_dir
 from offrl_jax.run.aggregate import aggregate, aggregate_table, arms, claims_table, plot_aggregate
 from offrl_jax.run.figures import behaviour_score, plot_studies
-from offrl_jax.run.results import check_curve_seeds, read_curves, short_curves
+from offrl_jax.run.results import check_curve_algos, check_curve_seeds, pretrain_ends_of, read_curves, short_curves
 from offrl_jax.run.study import Study
-from offrl_jax.run.summary import merge_runs, resummarize, summary_table as table
-from offrl_jax.system.cli import OneLineParser, check_writable_dir, check_writable_file, print_error
+from offrl_jax.run.summary import merge_runs, merged_differences, resummarize, summarize, summary_table as table
+from offrl_jax.system.cli import OneLineParser, being_written, check_writable_dir, check_writable_file, print_error
 
 
 def summaries(path: Path) -> list[Path]:
@@ -52,6 +54,37 @@ def summaries(path: Path) -> list[Path]:
     if not found:
         raise FileNotFoundError(f"{path}: no summary.json here or in its sub-directories")
     return found
+
+
+def check_settled(run: Path) -> None:
+    """Refuse (ValueError, one line) a run directory that a process is writing now (a run, --resume or --overwrite;
+    a study of a multi-study run is written under its parent's lock), or whose earlier run an interrupted
+    --overwrite left aside: neither holds one run's finished results."""
+    for d in (run, run.resolve().parent):
+        if being_written(d):
+            raise ValueError(f"{d} is being written by another process (a run, --resume or --overwrite); report it "
+                             "once that ends")
+    aside = replaced_dir(run.resolve())
+    if aside.exists():
+        raise ValueError(f"{run}: an --overwrite of it was stopped, and the run it was replacing is in {aside}; the "
+                         f"next --resume or --overwrite of {run} gives it back (or removes it if the new run has a "
+                         "checkpoint)")
+
+
+def listed_studies(dirs: list[Path]) -> list[Path]:
+    """Every summary.json that `dirs` hold (a run, or a directory of studies), each once: a study named twice,
+    directly or inside a directory of studies also given, is refused."""
+    seen: dict[Path, tuple[Path, Path]] = {}  # resolved -> (the directory given, the summary.json as found)
+    for d in dirs:
+        check_settled(d)
+        for path in summaries(d):
+            if path.parent != d:
+                check_settled(path.parent)
+            if path.resolve() in seen:
+                raise ValueError(f"{path.parent} is given twice (in {seen[path.resolve()][0]} and in {d}; a study "
+                                 "counts once)")
+            seen[path.resolve()] = d, path
+    return [path for _, path in seen.values()]
 
 
 def read_summary(path: Path) -> list[dict]:
@@ -66,12 +99,13 @@ def read_summary(path: Path) -> list[dict]:
     return summary
 
 
-def check_run(path: Path, summary: list[dict]) -> None:
+def check_run(path: Path, summary: list[dict]) -> str | None:
     """Refuse (ValueError, one line) a summary.json that its run's other files contradict: a config.json that is not
     a saved study or lacks the summary's variants or seeds, a curves.csv that is cut or edited (`read_curves`),
-    holds variants of another run, or ends before the summary's budget.  A summary may cover some of the study's
-    variants (a run stopped and summarised early); a summary.json alone (copied out of its run) is reported as it
-    is."""
+    holds variants of another run, or ends before the summary's budget, or, for a partial run (its curves end
+    before config.json's budget), runs past it.  A summary may cover some of the study's variants (a run stopped
+    and summarised where it stopped): returned is what makes such a run partial, for its heading.  A summary.json
+    alone (copied out of its run) is reported as it is."""
     run = path.parent
     variants = {s["variant"] for s in summary}
     known = variants
@@ -86,10 +120,15 @@ def check_run(path: Path, summary: list[dict]) -> None:
                              f"{', '.join(sorted(variants - known))} are not the study's")
         if any(list(s.get("seeds", study.seeds)) != list(study.seeds) for s in summary):
             raise ValueError(f"{path} does not belong with {run / 'config.json'}: other seeds")
+        algos = {v.label: v.algo for v in study.variants}
+        if other := next((s for s in summary if s.get("algo", algos[s["variant"]]) != algos[s["variant"]]), None):
+            raise ValueError(f"{path} does not belong with {run / 'config.json'}: its {other['variant']} is "
+                             f"{other['algo']}, the study's is {algos[other['variant']]}")
     if (run / "curves.csv").is_file():
         rows = read_curves(run / "curves.csv")
         if (run / "config.json").is_file():
             check_curve_seeds(run / "curves.csv", rows, study.seeds)
+            check_curve_algos(run / "curves.csv", rows, study)
         extra = {r["variant"] for r in rows if "variant" in r} - known
         if extra:
             raise ValueError(f"{run / 'curves.csv'} holds variant(s) of another run: {', '.join(sorted(extra))}")
@@ -99,9 +138,25 @@ def check_run(path: Path, summary: list[dict]) -> None:
                 raise ValueError(f"{run / 'curves.csv'} has no evaluation of {variant}, which {path} reports")
             raise ValueError(f"{run / 'curves.csv'}: {variant}'s evaluations end at update {last}, before the "
                              f"{budgets[variant]} updates of {path} (a truncated file?)")
+        if (run / "config.json").is_file() and (partial := short_curves(rows, dict.fromkeys(known, study.updates))):
+            where = ", ".join(f"{label} {'has no evaluation' if u is None else f'stopped at update {u:,}'}"
+                              for label, u in sorted(partial.items()))
+            if any(last is not None and last > budgets[label] for label, last in _last(rows, budgets).items()):
+                # evaluations past the summary's budget: a run stopped while --resume --updates N extended it
+                raise ValueError(f"{run} is a partial run: {where}, of the {study.updates:,} updates in its "
+                                 f"config.json (--resume {run} finishes it); its summary.json is of an earlier, "
+                                 "shorter run")
+            return f"partial: {where}, of {study.updates:,}; reported at the summary's budget"
+    return None
 
 
-def current(path: Path, summary: list[dict], reference: bool = True) -> list[dict]:
+def _last(rows: list[dict], budgets: dict[str, int]) -> dict[str, int | None]:
+    """Each variant's last evaluated update in curves.csv `rows`."""
+    return {label: max((r["update"] for r in rows if r.get("variant") == label and "update" in r), default=None)
+            for label in budgets}
+
+
+def current(path: Path, summary: list[dict], reference: bool = True, partial: bool = False) -> list[dict]:
     """The summary with today's statistics: recomputed from the run's config.json and curves.csv where both are
     there (the behaviour score as the run recorded it, else from the cached dataset), else summary.json as it is,
     if it has them (a summary.json copied out of its run)."""
@@ -110,6 +165,13 @@ def current(path: Path, summary: list[dict], reference: bool = True) -> list[dic
         known = next((s["behaviour_score"] for s in summary if s.get("behaviour_score") is not None), None)
         if known is None and reference:
             known = behaviour_score(summary[0].get("dataset", ""))
+        if partial:  # the variants and budget the summary was made for, not config.json's
+            study, labels = Study.from_json((run / "config.json").read_text()), [s["variant"] for s in summary]
+            study = dataclasses.replace(study, updates=max(s["updates"] for s in summary),
+                                        variants=tuple(v for v in study.variants if v.label in labels),
+                                        reference=study.reference if study.reference in labels else None)
+            rows = [r for r in read_curves(run / "curves.csv") if r.get("variant") in labels]
+            return summarize(study, rows, pretrain_ends_of(rows), known)
         return resummarize(run, known)
     if not all("final_iqm" in s for s in summary):
         raise ValueError(f"{path}: written before the interval statistics, and without its run's config.json and "
@@ -156,16 +218,30 @@ def main(argv=None) -> int:
             raise ValueError(f"{twice} is given twice (a study counts once)")
         if args.overlay and args.plot is None:
             raise ValueError("--overlay draws into the figure of --plot FIG.png; give --plot too")
+        if args.merge:
+            for d in args.dirs:
+                check_settled(d)
+        listed = [] if args.merge else listed_studies(args.dirs)
         if args.aggregate is not None:  # before any table is printed
             if args.merge:
                 raise ValueError("--aggregate takes two or more studies (--merge makes one)")
-            if sum(len(summaries(d)) for d in args.dirs) < 2:
+            if len(listed) < 2:
                 raise ValueError("--aggregate takes two or more studies")
+            variants = [[s["variant"] for s in read_summary(path)] for path in listed]
+            if not set.intersection(*map(set, variants)):
+                raise ValueError("--aggregate: the studies have no variant in common, so nothing to aggregate ("
+                                 + "; ".join(f"{path.parent}: {', '.join(v)}" for path, v in zip(listed, variants))
+                                 + ")")
+        if args.plot is not None and args.aggregate is not None and args.plot.resolve() == args.aggregate.resolve():
+            raise ValueError(f"--plot and --aggregate both name {args.plot}: the second figure would replace the first")
         for flag, fig in (("--plot", args.plot), ("--aggregate", args.aggregate)):
             if fig is not None:
                 if fig.suffix.lower() != ".png":
                     raise ValueError(f"{flag} {fig}: the name must end in .png")
                 for path in (fig, fig.with_suffix(".pdf")):
+                    if path.name in RUN_FILES and (path.parent / "config.json").is_file():
+                        raise ValueError(f"{flag} {fig}: {path} is a run's own file; a report figure goes elsewhere "
+                                         "(--overwrite replaces only a report's figures)")
                     if path.exists() and not args.overwrite:
                         raise FileExistsError(f"{flag}: {path} exists; pass --overwrite to replace it")
                     check_writable_file(path)
@@ -175,24 +251,27 @@ def main(argv=None) -> int:
                 raise FileExistsError(f"{args.merge} {what}; merge into a new directory")
             check_writable_dir(args.merge)
             merge_runs(args.dirs, args.merge)
+            if differ := merged_differences([Study.from_json((d / "config.json").read_text()) for d in args.dirs]):
+                print(f"warning: the merged variants differ in more than their pre-training: {'; '.join(differ)}",
+                      file=sys.stderr)
             args.dirs = [args.merge]
+            listed = listed_studies(args.dirs)
         study_dirs, found = [], []  # every study whose summary made a table: what --plot and the aggregate take
-        for d in args.dirs:
-            for path in summaries(d):
-                try:
-                    summary = read_summary(path)
-                    check_run(path, summary)
-                    summary = current(path, summary, reference=not args.no_reference)
-                    text = table(summary)
-                except (KeyError, TypeError, IndexError) as e:
-                    raise ValueError(f"{path}: not a run's summary (missing or empty {e})") from None
-                print(f"### {path.parent}\n\n{text}\n")
-                if args.curves:
-                    if not (path.parent / "curves.csv").is_file():
-                        raise FileNotFoundError(f"{path.parent}: no curves.csv, which --curves reads")
-                    print(curve_table(path.parent / "curves.csv") + "\n")
-                study_dirs.append(path.parent)
-                found.append(summary)
+        for path in listed:
+            try:
+                summary = read_summary(path)
+                partial = check_run(path, summary)
+                summary = current(path, summary, reference=not args.no_reference, partial=partial is not None)
+                text = table(summary)
+            except (KeyError, TypeError, IndexError) as e:
+                raise ValueError(f"{path}: not a run's summary (missing or empty {e})") from None
+            print(f"### {path.parent}" + (f" ({partial})" if partial else "") + f"\n\n{text}\n")
+            if args.curves:
+                if not (path.parent / "curves.csv").is_file():
+                    raise FileNotFoundError(f"{path.parent}: no curves.csv, which --curves reads")
+                print(curve_table(path.parent / "curves.csv") + "\n")
+            study_dirs.append(path.parent)
+            found.append(summary)
         if len(found) > 1:
             print(claims_table(found, [str(d) for d in study_dirs]) + "\n")
             if arms(found):

@@ -162,6 +162,16 @@ def test_report_refuses_a_summary_that_is_not_one(tmp_path):
 RUN = Path(__file__).resolve().parents[1] / "results" / "mujoco_medium" / "default-20261202"
 
 
+def extended_and_stopped(run: Path) -> None:
+    """What `--resume RUN --updates 100000` of a finished 70k run leaves when it is stopped: config.json says the
+    new budget, one variant has evaluations past the old one, summary.json is the 70k run's."""
+    (run / "config.json").write_text((run / "config.json").read_text().replace('"updates": 70000', '"updates": 100000'))
+    lines = (run / "curves.csv").read_text().splitlines(True)
+    more = [line.replace(",70000,", ",75000,") for line in lines
+            if line.startswith("pretrained,") and ",70000," in line]
+    (run / "curves.csv").write_text("".join(lines + more))
+
+
 @pytest.mark.parametrize("damage, message", [
     (None, None),
     # a summary without its config is reported as it is, if it has the interval statistics; this run's is older
@@ -180,6 +190,12 @@ RUN = Path(__file__).resolve().parents[1] / "results" / "mujoco_medium" / "defau
      "has two rows at update"),  # the file appended to itself
     (lambda run: (run / "curves.csv").write_text((run / "curves.csv").read_text().replace(",td3bc,1,", ",td3bc,7,")),
      "has seeds 0, 2, 7 where its run has 0, 1, 2"),  # a seed relabelled
+    (lambda run: (run / "curves.csv").write_text((run / "curves.csv").read_text().replace(",td3bc,", ",iql,")),
+     "its pretrained rows are iql's, where the run trains td3bc"),  # another algorithm's curves
+    (lambda run: (run / "summary.json").write_text((run / "summary.json").read_text().replace('"td3bc"', '"iql"')),
+     "its pretrained is iql, the study's is td3bc"),
+    (extended_and_stopped, "is a partial run: pretrained stopped at update 75,000, scratch stopped at update 70,000, "
+                           "of the 100,000 updates in its config.json"),
 ])
 def test_report_reads_a_run_as_a_whole(tmp_path, capsys, damage, message):
     """report RUN checks the summary against the run's config.json and curves.csv: a damaged or mixed run is one
@@ -220,3 +236,42 @@ def test_a_choice_given_twice_is_refused(module, args, message):
 def test_theory_refuses_an_error_whose_noise_floor_hides_the_target():
     assert "nothing to converge to" in _one_line_error("experiments.theory", "--mdps", "1", "--states", "5",
                                                        "--eps", "5", "--betas", "0")
+
+
+def test_report_refuses_a_run_being_written_or_half_replaced(tmp_path, capsys):
+    """A run that a process holds (a run, --resume, --overwrite) and one whose earlier run an interrupted --overwrite
+    left aside are refused with one line naming why; neither is read as a finished run."""
+    from experiments.report import main
+    from offrl_jax.system.cli import lock_run_dir
+
+    run = tmp_path / "run"
+    shutil.copytree(RUN, run)
+    lock = lock_run_dir(run)
+    try:
+        assert main([str(run)]) == 2
+        out, err = capsys.readouterr()
+        assert not out and "is being written by another process" in err and len(err.strip().splitlines()) == 1
+    finally:
+        lock.close()
+    assert main([str(run)]) == 0
+    capsys.readouterr()
+    aside = tmp_path / ".run.replaced"
+    run.rename(aside)
+    run.mkdir()  # the new run had begun: its config.json, no curves yet
+    shutil.copy(aside / "config.json", run / "config.json")
+    assert main([str(run)]) == 2
+    out, err = capsys.readouterr()
+    assert not out and f"the run it was replacing is in {aside}" in err, err
+
+
+def test_report_says_a_run_is_partial_and_reports_it_at_the_budget_its_summary_was_made_for(capsys):
+    """A run stopped on purpose and summarised where it stopped (one arm, 14k of 16k updates): its heading says so,
+    and its numbers are labelled with the 14k they were measured at, not config.json's 16k."""
+    from experiments.report import main
+
+    run = RUN.parents[1] / "figure2" / "hopper-edac-critic9k"
+    assert main([str(run), "--no-reference"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith(f"### {run} (partial: pretrained stopped at update 14,000, scratch has no evaluation, of "
+                          "16,000; reported at the summary's budget)\n"), out
+    assert "2 seeds, 14,000 updates per variant" in out and "16,000" not in out.split("\n", 1)[1]

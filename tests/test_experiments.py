@@ -54,6 +54,8 @@ def curves_without_time(path: Path) -> list[dict]:
     (["--resume", "/nonexistent/run"], "nothing to resume"),
     (["--updates", "5000"], "pre-training updates (10000) exceed the total budget (5000)"),
     (["--updates", "20000", "--eval-every", "1001"], "must be multiples of 2"),  # TD3's 2-update call grid
+    (["--level", "expert", "--dataset-path", "x.hdf5"], "--level names a generated dataset"),  # else ignored
+    (["--pretrain-auto-window", "2000"], "--pretrain-auto-window applies only to --pretrain-updates auto"),
 ])
 def test_bad_input_is_one_line_and_writes_nothing(tmp_path, args, message):
     out = tmp_path / "out"
@@ -134,6 +136,62 @@ def test_overwrite_replaces_an_earlier_run_only_once_the_new_one_can_start(tmp_p
     assert (out / "summary.json").read_text() != "earlier" and not (out.parent / ".run.replaced").exists()
 
 
+FAR = ["--updates", "20000", "--eval-every", "10000", "--pretrain-updates", "10000"]  # a first checkpoint far off
+SHORT = [*TINY, "--updates", "200", "--pretrain-updates", "100", "--parallel", "1"]  # a finished run, soon
+
+
+def start_overwrite(tiny_hdf5, out: Path, **popen) -> subprocess.Popen:
+    """An --overwrite of the run in `out`, returned once it has moved that run aside and begun the new one (in one
+    process: the parent ignores Ctrl-C while it starts worker processes)."""
+    proc = subprocess.Popen([sys.executable, "-m", "experiments.mujoco_medium", "--dataset-path", str(tiny_hdf5),
+                             "--out", str(out), "--overwrite", *TINY, *FAR, "--parallel", "1"], cwd=ROOT, **popen)
+    deadline = time.time() + 300
+    while not ((out / "config.json").exists() and (out.parent / f".{out.name}.replaced").exists()):
+        assert time.time() < deadline and proc.poll() is None
+        time.sleep(0.02)
+    assert not any(out.rglob("*.msgpack"))
+    return proc
+
+
+def test_a_killed_overwrite_leaves_the_earlier_run_where_the_next_command_finds_it(tmp_path, tiny_hdf5):
+    """SIGKILL before the new run's first checkpoint: `report` names where the earlier run is, the next run command
+    on the directory gives it back (a --resume then has nothing of the new run to continue), and a second
+    --overwrite never deletes it unseen."""
+    out, aside = tmp_path / "run", tmp_path / ".run.replaced"
+    cli("--dataset-path", tiny_hdf5, "--out", out, *SHORT, check=True)
+    earlier = (out / "summary.json").read_text()
+    proc = start_overwrite(tiny_hdf5, out, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    proc.kill()
+    proc.wait()
+    result = run_module("experiments.report", str(out))
+    assert result.returncode == 2 and f"the run it was replacing is in {aside}" in result.stderr, result.stderr
+    result = cli("--resume", out, "--no-progress")
+    assert result.returncode == 2 and "the earlier run in" in result.stderr and "is given back" in result.stderr
+    assert result.stderr.strip().splitlines()[-1].startswith(f"error: {out}: the --overwrite that was replacing")
+    assert (out / "summary.json").read_text() == earlier and not aside.exists()
+    # the same state again, then an --overwrite whose data fails to load: the earlier run is back, not deleted
+    out.rename(aside)
+    out.mkdir()
+    (out / "config.json").write_text((aside / "config.json").read_text())
+    result = cli("--dataset-path", tmp_path / "missing.hdf5", "--out", out, "--overwrite", *TINY)
+    assert result.returncode == 2 and "is given back" in result.stderr, result.stderr
+    assert (out / "summary.json").read_text() == earlier and not aside.exists()
+
+
+def test_an_interrupted_overwrite_says_the_earlier_run_is_kept_not_resume(tmp_path, tiny_hdf5):
+    out = tmp_path / "run"
+    cli("--dataset-path", tiny_hdf5, "--out", out, *SHORT, check=True)
+    earlier = (out / "summary.json").read_text()
+    proc = start_overwrite(tiny_hdf5, out, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                           preexec_fn=terminal_sigint)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines()[-1] == (f"interrupted before the new run's first checkpoint; the earlier run in "
+                                            f"{out} is kept (the new one left nothing to resume)"), err
+    assert "resume with" not in err and (out / "summary.json").read_text() == earlier
+
+
 def test_kill_and_resume_equals_uninterrupted_run(tmp_path, tiny_hdf5):
     full, killed = tmp_path / "full", tmp_path / "killed"
     cli("--dataset-path", tiny_hdf5, "--out", full, *TINY, check=True, timeout=600)
@@ -178,7 +236,8 @@ def test_sigterm_is_a_stop_with_the_resume_command(tmp_path, tiny_hdf5, backgrou
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 143, err
-    assert f"interrupted; resume with --resume {stopped} --no-progress\n" in err and "Traceback" not in err
+    parallel = "" if background else " --parallel 1"  # a resume keeps the run's --parallel
+    assert f"interrupted; resume with --resume {stopped} --no-progress{parallel}\n" in err and "Traceback" not in err
     assert ("\n" + err).count("\ninterrupted; resume") == 1, err  # on a line of its own, not on the progress bar's
 
 
@@ -279,6 +338,79 @@ def test_config_replays_a_saved_run_and_resume_refuses_other_settings(tmp_path, 
     cli("--dataset-path", tiny_hdf5, "--out", longer, *TINY[:1], "600", *TINY[2:], check=True, timeout=600)
     assert curves_without_time(first / "curves.csv") == curves_without_time(longer / "curves.csv")
     assert len(json.loads((first / "config.json").read_text())["runs"]) == 2  # the start and the extension
+
+
+def test_a_config_replay_is_exact_or_refused(tmp_path, tiny_hdf5):
+    """--config never trains variants under labels their values contradict (one value for a swept field), nor on
+    data other than the saved run's unless a data flag says so; both refusals come before anything is written."""
+    from offrl_jax.data import catalogue
+    from offrl_jax.run.study import Study, Variant
+
+    sweep = tuple(Variant.of(f"scratch actor_beta={b:g}", "rebrac", actor_beta=b, pretrain="none")
+                  for b in (0.001, 0.01))
+    study = Study(name="sweep", dataset=str(tiny_hdf5), env="hopper", variants=sweep, updates=400, eval_every=100)
+    saved = tmp_path / "sweep.json"
+    saved.write_text(study.record_json())
+    result = cli("--config", saved, "--out", tmp_path / "new", "--actor-beta", "0.5", timeout=120)
+    assert result.returncode == 2 and not (tmp_path / "new").exists(), result.stderr
+    assert result.stderr.strip().splitlines()[-1].startswith(
+        "error: --actor-beta: the saved run's variants differ in actor_beta (scratch actor_beta=0.001: 0.001, "
+        "scratch actor_beta=0.01: 0.01)"), result.stderr
+    # the data file changed since the run: its SHA-256 is not the one config.json recorded
+    study = Study(name="one", dataset=str(tiny_hdf5), env="hopper",
+                  variants=(Variant.of("scratch", "td3bc", pretrain="none"),), updates=400, eval_every=100,
+                  batch_size=32)
+    saved.write_text(study.record_json(catalogue.load(str(tiny_hdf5)), data_sha256="ab" * 32))
+    result = cli("--config", saved, "--out", tmp_path / "new", timeout=120)
+    assert result.returncode == 2 and not (tmp_path / "new").exists(), result.stderr
+    assert "not the data the saved run trained on (SHA-256" in result.stderr.strip().splitlines()[-1], result.stderr
+    assert f"say so with --dataset-path {tiny_hdf5}" in result.stderr
+
+
+def test_a_resume_keeps_the_runs_parallel(tmp_path, tiny_hdf5):
+    """Variants side by side (one core each) or one after another (sharing the cores) round differently, so a
+    resume with another --parallel is refused like any other changed setting, before anything is written."""
+    import json
+
+    from offrl_jax.data import catalogue
+    from offrl_jax.run.study import Study, Variant
+
+    run = tmp_path / "run"
+    run.mkdir()
+    study = Study(name="two", dataset=str(tiny_hdf5), env="hopper", updates=400, eval_every=100, batch_size=32,
+                  variants=(Variant.of("a", "td3bc", pretrain="none"), Variant.of("b", "td3bc", pretrain="none",
+                                                                                    hidden=(32, 32))))
+    record = json.loads(study.record_json(catalogue.load(str(tiny_hdf5))))
+    for command, saved, given in (("", "2", ["--parallel", "1"]), (" --parallel 1", "1", [])):
+        record["runs"][-1]["command"] = f"python -m experiments.mujoco_medium --out {run}{command}"
+        (run / "config.json").write_text(json.dumps(record))
+        before = (run / "config.json").read_text()
+        result = cli("--resume", run, *given, timeout=120)
+        assert result.returncode == 2 and (run / "config.json").read_text() == before, result.stderr
+        now = given[1] if given else "2"
+        assert result.stderr.strip().splitlines()[-1].endswith(
+            f"it ran with --parallel {saved}, and --parallel {now} would train the rest differently (rounding); "
+            f"resume with --parallel {saved}"), result.stderr
+
+
+def test_a_config_replay_keeps_the_saved_runs_parallel_unless_given(tmp_path, tiny_hdf5):
+    import json
+
+    from experiments.mujoco_medium import make_parser
+    from offrl_jax.app.command import Command
+    from offrl_jax.app.studies import HPARAM_DESTS, given
+    from offrl_jax.run.study import Study, Variant
+
+    study = Study(name="one", dataset=str(tiny_hdf5), env="hopper", updates=400, eval_every=100, batch_size=32,
+                  variants=(Variant.of("scratch", "td3bc", pretrain="none"),))
+    record = json.loads(study.record_json())
+    record["runs"][-1]["command"] = "python -m experiments.mujoco_medium --parallel 1"
+    (tmp_path / "config.json").write_text(json.dumps(record))
+    for argv, parallel in (([], 1), (["--parallel", "2"], 2)):
+        argv = ["--config", str(tmp_path / "config.json"), "--out", str(tmp_path / "new"), *argv]
+        command = Command(make_parser().parse_args(argv), make_parser(), argv)
+        command.read(None, given, HPARAM_DESTS)
+        assert command.args.parallel == parallel
 
 
 def test_debug_variable_shows_the_traceback(tmp_path):

@@ -1,6 +1,7 @@
 """`experiments.report --plot`: the committed Figure 2 runs as one grid (rows: envs, columns: algorithms)."""
 from __future__ import annotations
 
+import shutil
 import struct
 from pathlib import Path
 
@@ -87,3 +88,37 @@ def test_a_runs_curves_title_says_what_its_band_is_and_one_seed_has_none():
     assert (curves_title("hm-td3bc", "hopper-medium", 5)
             == "hm-td3bc: hopper-medium, 5 seeds, IQM and stratified-bootstrap 95% CI")
     assert curves_title("hm-td3bc", "hopper-medium", 1) == "hm-td3bc: hopper-medium, 1 seed: no interval"
+
+
+def test_report_counts_a_study_inside_a_directory_of_studies_once(tmp_path, capsys):
+    """A directory of studies and a study inside it: the study would count twice in the aggregate; refused."""
+    from experiments import report
+
+    studies = tmp_path / "studies"
+    for run in RUNS[:2]:
+        shutil.copytree(run, studies / run.name)
+    assert report.main([str(studies), str(studies / RUNS[0].name), "--no-reference"]) == 2
+    out, err = capsys.readouterr()
+    assert not out and err.startswith(f"error: {studies / RUNS[0].name} is given twice"), err
+    assert report.main([str(studies), "--no-reference"]) == 0 and "Across 2 studies" in capsys.readouterr().out
+
+
+def test_aggregate_refuses_studies_without_a_variant_in_common_and_a_runs_own_figure(tmp_path, capsys):
+    from experiments import report
+
+    other = ROOT / "results" / "layernorm" / "hopper-td3bc"  # LN variants: none in common with Figure 2's
+    figure = tmp_path / "agg.png"
+    assert report.main([str(RUNS[0]), str(other), "--aggregate", str(figure), "--no-reference"]) == 2
+    out, err = capsys.readouterr()
+    assert not out and err.startswith("error: --aggregate: the studies have no variant in common"), err
+    assert len(err.strip().splitlines()) == 1 and not figure.exists()
+    run = tmp_path / "run"
+    shutil.copytree(RUNS[0], run)
+    before = (run / "curves.png").read_bytes()
+    assert report.main([str(run), str(RUNS[1]), "--aggregate", str(run / "curves.png"), "--overwrite",
+                        "--no-reference"]) == 2
+    out, err = capsys.readouterr()
+    assert not out and "is a run's own file" in err and (run / "curves.png").read_bytes() == before, err
+    assert report.main([str(RUNS[0]), str(RUNS[1]), "--plot", str(figure), "--aggregate", str(figure),
+                        "--no-reference"]) == 2
+    assert "--plot and --aggregate both name" in capsys.readouterr().err and not figure.exists()

@@ -194,3 +194,34 @@ def test_overwrite_of_a_run_refuses_files_no_run_writes(tmp_path, extra):
         (out / extra).mkdir() if extra.endswith("/") else (out / extra).write_text("mine\n")
     line = refused(tmp_path, "experiments.mujoco_medium", "--out", out, "--overwrite", "--updates", "20000")
     assert f"holds {extra.rstrip('/')}, which a run does not write" in line, line
+
+
+def test_what_a_killed_overwrite_left_aside_is_given_back_or_removed_and_left_alone_while_it_runs(tmp_path, capsys):
+    """`.<name>.replaced` beside a run: left as it is while a process holds the run (the --overwrite is alive),
+    given back when the new run has no checkpoint, removed (and said) when it has one."""
+    from offrl_jax.app.outputs import give_back_replaced, replaced_dir
+    from offrl_jax.system.cli import lock_run_dir
+
+    out = tmp_path / "run"
+    aside = replaced_dir(out)
+
+    def leave(new_checkpoint: bool) -> None:
+        aside.mkdir()
+        (aside / "summary.json").write_text("earlier")
+        (out / "checkpoints").mkdir(parents=True)
+        (out / "config.json").write_text("{}")
+        if new_checkpoint:
+            (out / "checkpoints" / "pretrained.msgpack").write_bytes(b"new")
+
+    leave(new_checkpoint=False)
+    lock = lock_run_dir(out)
+    assert give_back_replaced(out) is False and aside.is_dir() and (out / "config.json").exists()
+    lock.close()
+    assert give_back_replaced(out) is True and not aside.exists()
+    assert (out / "summary.json").read_text() == "earlier" and not (out / "config.json").exists()
+    assert "is given back" in capsys.readouterr().err
+    shutil.rmtree(out)
+    leave(new_checkpoint=True)
+    assert give_back_replaced(out) is False and not aside.exists()
+    assert (out / "checkpoints" / "pretrained.msgpack").read_bytes() == b"new"
+    assert f"removed {aside}" in capsys.readouterr().err

@@ -286,6 +286,21 @@ def test_npz_missing_key(tmp_path):
     assert_one_line(err, path, "missing key 'episode_lengths'")
 
 
+@pytest.mark.parametrize("dropped, named", [(("terminals",), "'terminals'"),
+                                            (("terminals", "timeouts"), "'episode_lengths' (Adroit's demonstrations) "
+                                                                        "or 'terminals' (D4RL's keys)")])
+def test_an_npz_with_d4rl_keys_but_no_terminals_names_terminals_as_the_hdf5_twin(tmp_path, dropped, named):
+    arrays = {k: v for k, v in d4rl_arrays().items() if k not in dropped}
+    np.savez(tmp_path / "d.npz", **arrays)
+    with pytest.raises(DatasetError) as err:
+        read_door_npz(tmp_path / "d.npz")
+    assert_one_line(err, tmp_path / "d.npz", f"missing key {named}")
+    if dropped == ("terminals",):
+        with pytest.raises(DatasetError) as err:
+            read_d4rl_hdf5(write_h5(tmp_path / "d.hdf5", arrays))
+        assert_one_line(err, tmp_path / "d.hdf5", "missing key 'terminals'")
+
+
 # ------------------------------------------------------------------------------------------------------ bad input
 def test_missing_file(tmp_path):
     for name in ("absent.hdf5", "absent.npz"):

@@ -272,3 +272,14 @@ def test_a_run_stopped_after_its_first_evaluation_has_a_checkpoint_to_resume_fro
     assert (tmp_path / "run" / "checkpoints" / "pretrained.msgpack").is_file()
     from offrl_jax.run.provenance import fingerprint
     check_resume(study, tmp_path / "run", ds, fingerprint(ds))  # raises if it would be refused
+
+
+def test_checkpoint_every_evaluation_keeps_one_at_every_evaluation_off_grid_hand_over_included(tmp_path):
+    """--checkpoint-every 0 is every evaluation: with the hand-over at 100, off the 150-update evaluation grid,
+    the evaluations at 100, 150 and 300 each leave a kept checkpoint (150 was skipped, 50 updates after 100)."""
+    from offrl_jax.run.resume import kept_updates
+
+    study = tiny_study(updates=300, eval_every=150, checkpoint_every=0, keep_checkpoints=5,
+                       variants=(Variant.of("pretrained", "td3bc", pretrain_updates=100, hidden=(32, 32)),))
+    run_study(study, tmp_path / "run", synthetic_dataset(), progress=False)
+    assert kept_updates(tmp_path / "run", study.variants) == [100, 150, 300]

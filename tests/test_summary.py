@@ -205,7 +205,8 @@ def test_merge_runs_resummarises_variants_trained_apart(tmp_path, capsys):
     a = _run_dir(tmp_path / "a", pre, pre_rows)
     b = _run_dir(tmp_path / "b", scratch, scratch_rows)
     assert report.main(["--merge", str(tmp_path / "ab"), str(a), str(b)]) == 0
-    assert "| pretrained | 90.0 [85.0, 95.0] |" in capsys.readouterr().out
+    out, err = capsys.readouterr()
+    assert "| pretrained | 90.0 [85.0, 95.0] |" in out and "warning" not in err  # they differ in pre-training only
     summary = {s["variant"]: s for s in json.loads((tmp_path / "ab" / "summary.json").read_text())}
     # the scratch run's final (mean of 100 and 80) is now the pretrained variant's asymptote too, and scratch its
     # reference; 90 % of the best (seed-mean 90, both at 4000) is 81: pretrained at 3000 and 4000 updates, scratch
@@ -271,3 +272,18 @@ def test_merge_refuses_a_run_whose_curves_hold_other_seeds(tmp_path, capsys):
     assert report.main(["--merge", str(tmp_path / "m"), str(run)]) == 2
     assert "scratch has seeds 0, 7 where its run has 0, 1" in capsys.readouterr().err
     assert not (tmp_path / "m").exists()
+
+
+def test_merge_says_when_the_variants_differ_in_more_than_their_pre_training(tmp_path, capsys):
+    from experiments import report
+
+    common = dict(name="t", dataset="hopper-medium", env="hopper", seeds=(0,), updates=200, eval_every=100)
+    runs = []
+    for label, pretrain, alpha in (("pretrained", "actor+critic", 2.5), ("scratch", "none", 10.0)):
+        study = Study(variants=(Variant.of(label, "td3bc", pretrain=pretrain, pretrain_updates=100, alpha=alpha),),
+                      **common)
+        runs.append(_run_dir(tmp_path / label, study, rows_of(label, [[1.0, 2.0]], every=100)))
+    assert report.main(["--merge", str(tmp_path / "m"), *map(str, runs)]) == 0
+    err = capsys.readouterr().err
+    assert "warning: the merged variants differ in more than their pre-training: alpha (pretrained: 2.5, " \
+           "scratch: 10.0)\n" in err, err

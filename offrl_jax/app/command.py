@@ -1,11 +1,12 @@
 """What `python -m experiments.<name>` does, as named steps: `run_command(build, parser, argv)`.
 
     1. read the command      flags checked; the study (or studies) built, replayed from --config, or read back for
-                             --resume
+                             --resume; what a killed --overwrite of the directory left aside given back
     2. start the processes   this process's CPU cores, a multi-process run's others (`offrl_jax.app.launch`)
     3. claim the output      the run directory chosen (`offrl_jax.app.outputs`), checked writable and locked
     4. load the data         every dataset once, before anything is written; bad data fails here
-    5. check a resume        every checkpoint belongs to its study, data and settings (`offrl_jax.run.resume`)
+    5. check a resume        every checkpoint belongs to its study, data and settings (`offrl_jax.run.resume`),
+                             --parallel too; a --config replay's data is the saved run's
     6. run                   each study into its directory (`offrl_jax.run.runner.run_study`), its table printed
     7. clean up              an --overwrite'd earlier run deleted, or given back if the new one has no checkpoint
                              yet; a claimed directory that got nothing removed; the lock released
@@ -26,10 +27,17 @@ from collections.abc import Callable
 from pathlib import Path
 
 from offrl_jax.app.launch import check_backend, start_local_processes, start_processes, use_cpu_cores
-from offrl_jax.app.outputs import check_resume_dir, output_dir, saved_studies, studies_json
+from offrl_jax.app.outputs import (
+    check_resume_dir,
+    give_back_replaced,
+    output_dir,
+    replaced_dir,
+    saved_studies,
+    studies_json,
+)
 from offrl_jax.data import catalogue
 from offrl_jax.data.dataset import DatasetError, rows_without_timeouts
-from offrl_jax.run.provenance import fingerprint
+from offrl_jax.run.provenance import fingerprint, recorded_command, recorded_data
 from offrl_jax.run.resume import check_resume, edited_resolved
 from offrl_jax.run.runner import Diverged, run_study
 from offrl_jax.run.study import Study, Variant
@@ -48,6 +56,9 @@ RUN_FIELDS = ("updates", "eval_every", "eval_episodes", "batch_size", "checkpoin
               "max_transitions", "clip_actions")
 REPLAY_FLAGS = frozenset({"config", "out", "overwrite", "parallel", "no_progress", "logger", "seeds", "seed_offset",
                           "dataset_path", *RUN_FIELDS, *PROCESS_FLAGS})
+
+
+DATA_FLAGS = frozenset({"dataset_path", "max_transitions", "clip_actions"})  # with --config: other data, knowingly
 
 
 def given_dests(parser: argparse.ArgumentParser, argv=None) -> set[str]:
@@ -86,6 +97,12 @@ def replay(saved: Study | list[Study], args, given: set[str], hparams: dict) -> 
         fields["dataset"] = str(args.dataset_path)
 
     def one(study: Study) -> Study:
+        for field in hparams:  # the variants were made to differ in it (a sweep, an ablation): their labels say so
+            values = {repr(dict(v.overrides).get(field, "(its default)")): v for v in study.variants}
+            if len(values) > 1:
+                raise UsageError(f"--{field.replace('_', '-')}: the saved run's variants differ in {field} ("
+                                 f"{', '.join(f'{v.label}: {k}' for k, v in values.items())}), so one value for all "
+                                 "would leave their labels false; start a new run to compare other values")
         variants = tuple(Variant.of(v.label, v.algo, **(dict(v.overrides) | hparams)) for v in study.variants)
         return dataclasses.replace(study, variants=variants, **fields)
 
@@ -119,6 +136,9 @@ class Command:
     lock: object = None
     local: object = None  # the other processes of a --processes run
     writer: bool = True  # this process writes the run (process 0 of a multi-process run)
+    given_back: bool = False  # the earlier run is back in `out`: the new one ended before its first checkpoint
+    interrupted: bool = False  # by Ctrl-C or SIGTERM
+    saved_data: dict = dataclasses.field(default_factory=dict)  # --config: study -> the SHA-256 its data had
 
     @property
     def resuming(self) -> bool:
@@ -143,6 +163,12 @@ class Command:
         if self.resuming and args.config is not None:
             raise UsageError("--resume and --config exclude each other: --resume continues a run in place, "
                              "--config starts a new one from its settings")
+        named = args.resume if self.resuming else args.out
+        if named is not None and replaced_dir(named).is_dir():  # an --overwrite of it was killed: finish its work
+            if give_back_replaced(named) and self.resuming:
+                raise UsageError(f"{named}: the --overwrite that was replacing this run stopped before its first "
+                                 f"checkpoint, so nothing of it can be resumed; the earlier run is back in {named} "
+                                 "(--overwrite starts the new run again, --resume continues the earlier one)")
         if self.resuming:
             check_resume_dir(args.resume)
         if self.resuming and given - RESUME_FLAGS:
@@ -167,6 +193,11 @@ class Command:
                 if own.is_file() and (edited := edited_resolved(study, own)):
                     raise UsageError(f"{edited}; the `resolved` section is a record, not read: change a value with "
                                      f"its flag (--config {path} --FLAG VALUE)")
+                if own.is_file() and (sha := recorded_data(own)):
+                    self.saved_data[study.name] = sha
+                saved_parallel = recorded_parallel(own, self.parser.prog, self.parser.get_default("parallel"))
+                if "parallel" not in given and saved_parallel is not None:  # as it ran: the same rounding
+                    args.parallel = saved_parallel
             self.built = replay(saved, args, given, typed)
         elif not self.resuming:
             # validates every hyper-parameter and budget; `typed`: the flags typed, a default value typed included
@@ -215,21 +246,42 @@ class Command:
                                      f"{study.batch_size}; keep them with --timeouts bootstrap or stop{lower}")
         return data
 
-    # 5. check a resume: every study's checkpoints must be its own, before anything is written
+    # 5. check a resume (every study's checkpoints must be its own) or a replay, before anything is written
     def check_resume(self, data: list, shas: list[str]) -> None:
+        self.check_replay(shas)
         if not self.resuming:
             return
+        for study in self.studies:  # variants one after another or side by side round differently: not mixed
+            groups = len(study.groups())
+            saved = recorded_parallel(self.study_dir(study) / "config.json", self.parser.prog,
+                                      self.parser.get_default("parallel"))
+            if saved is not None and min(saved, groups) != min(self.args.parallel, groups):
+                raise UsageError(f"--resume continues {self.out} with its saved settings: it ran with --parallel "
+                                 f"{saved}, and --parallel {self.args.parallel} would train the rest differently "
+                                 f"(rounding); resume with --parallel {saved}")
         for study, ds, sha in zip(self.studies, data, shas):
             if self.study_dir(study).is_dir():  # a study of a multi-study run not begun yet has none
                 check_resume(study, self.study_dir(study), ds, sha)
         if "updates" in self.given and isinstance(self.built, list) and self.writer:
             atomic_write_text(self.out / "config.json", studies_json(self.built))
 
+    def check_replay(self, shas: list[str]) -> None:
+        """--config re-runs a run exactly: on the data it trained on, unless a flag given with it changes the data."""
+        if self.args.config is None or self.given & DATA_FLAGS:
+            return
+        for study, sha in zip(self.studies, shas):
+            if self.saved_data.get(study.name, sha) != sha:
+                raise UsageError(f"{study.dataset}: not the data the saved run trained on (SHA-256 {sha[:12]}..., "
+                                 f"recorded {self.saved_data[study.name][:12]}...); --config re-runs a run exactly: "
+                                 f"to train on the data as it is now, say so with --dataset-path {study.dataset}")
+
     # 6. run
     def run(self, data: list, shas: list[str]) -> None:
         if self.replace:  # moved aside, not deleted: a new run that fails before its first checkpoint gives it back
-            self.replaced = self.out.with_name(f".{self.out.name}.replaced")
-            shutil.rmtree(self.replaced, ignore_errors=True)
+            aside = replaced_dir(self.out)
+            if aside.exists():  # `read` gave back or removed what a killed --overwrite left there
+                raise UsageError(f"{aside} exists: it may hold an earlier run; move it away first")
+            self.replaced = aside
             self.out.rename(self.replaced)
         if isinstance(self.built, list) and not self.resuming and self.writer:
             self.out.mkdir(parents=True, exist_ok=True)  # the whole studies, so --resume can start those not begun
@@ -256,8 +308,10 @@ class Command:
             else:
                 shutil.rmtree(out, ignore_errors=True)
                 self.replaced.rename(out)
-                print(f"the earlier run in {out} is kept: the new one ended before its first checkpoint",
-                      file=sys.stderr)
+                self.given_back = True
+                if not self.interrupted:  # the interruption's own line says it
+                    print(f"the earlier run in {out} is kept: the new one ended before its first checkpoint",
+                          file=sys.stderr)
         claimed = out is not None and args.resume is None and args.out is None  # runs/<study>/<timestamp>
         if claimed and out.is_dir() and not any(out.iterdir()):  # it got nothing (the data failed to load)
             out.rmdir()
@@ -276,6 +330,34 @@ class Command:
                 except OSError:
                     break
         return failed
+
+
+def recorded_parallel(config_path: Path, prog: str, default: int) -> int | None:
+    """The --parallel of a run's last start or resume by command `prog` (`default` where it was not given; None:
+    not recorded, or started otherwise, say by `run_study` from Python)."""
+    words = recorded_command(config_path)
+    if words is None or words[1:3] != ["-m", prog]:
+        return None
+    value = next((w.split("=", 1)[1] if "=" in w else nxt for w, nxt in zip(words, words[1:] + [""])
+                  if w == "--parallel" or w.startswith("--parallel=")), None)
+    try:
+        return default if value is None else int(value)
+    except ValueError:
+        return None
+
+
+def interrupted_line(command: Command) -> str:
+    """What an interrupted command says: how to resume the run it leaves, or that the earlier run is back."""
+    out = command.out
+    if command.given_back:
+        return (f"interrupted before the new run's first checkpoint; the earlier run in {out} is kept (the new one "
+                "left nothing to resume)")
+    display = " --no-progress" if getattr(command.args, "no_progress", False) else ""
+    if (parallel := getattr(command.args, "parallel", None)) != command.parser.get_default("parallel"):
+        display += f" --parallel {parallel}"  # a resume keeps it (`Command.check_resume`)
+    where = (f"; resume with --resume {shlex.quote(str(out))}{display}"
+             if out is not None and (out / "config.json").is_file() else "")
+    return f"interrupted{where}"
 
 
 def run_command(build: Build, parser: argparse.ArgumentParser, argv=None,
@@ -304,16 +386,13 @@ def run_command(build: Build, parser: argparse.ArgumentParser, argv=None,
         code = 3 if isinstance(e, Diverged) else 2
         return code
     except KeyboardInterrupt:
-        out = command.out
-        display = " --no-progress" if getattr(command.args, "no_progress", False) else ""
-        where = (f"; resume with --resume {shlex.quote(str(out))}{display}"
-                 if out is not None and (out / "config.json").is_file() else "")
-        print(f"interrupted{where}", file=sys.stderr)
-        code = 130
+        command.interrupted, code = True, 130
         return code
     finally:
         with shielded():  # the results are written, or the run is ending: its clean-up is not cut half-way
             failed = command.clean_up(ok)
+        if command.interrupted:  # said once the clean-up has made it true
+            print(interrupted_line(command), file=sys.stderr)
         if command.local is not None and not ok:  # leave now: JAX's exit handler would wait for the processes
             sys.stdout.flush()
             sys.stderr.flush()

@@ -4,18 +4,20 @@ directory was started with.
 Rules: a new run writes to a new timestamped directory under runs/<study>/ unless --out is given; an existing,
 non-empty --out is refused unless --overwrite, and --overwrite replaces only a directory whose config.json is a
 saved study and which holds nothing a run does not write; --resume DIR continues the study (or studies) saved in
-DIR.  Nothing here deletes anything: `offrl_jax.app.command` moves an earlier run aside and gives it back.
+DIR.  `offrl_jax.app.command` moves an earlier run aside (`replaced_dir`) and gives it back; a command killed
+before it could do either leaves it there, and `give_back_replaced` finishes its work for the next command.
 """
 from __future__ import annotations
 
 import argparse
 import json
+import shutil
 import sys
 import time
 from pathlib import Path
 
 from offrl_jax.run.study import Study, check_file_name
-from offrl_jax.system.cli import UsageError, file_for_run_dir
+from offrl_jax.system.cli import UsageError, file_for_run_dir, lock_run_dir
 
 
 def output_dir(args, study_name: str) -> tuple[Path, bool]:
@@ -51,6 +53,55 @@ def output_dir(args, study_name: str) -> tuple[Path, bool]:
                              "a run does not write; --overwrite replaces only a run: move them or choose another --out")
         return args.out, True
     return args.out, False
+
+
+def replaced_dir(out: Path) -> Path:
+    """Where --overwrite keeps the earlier run in `out` until the new run has its first checkpoint."""
+    return out.with_name(f".{out.name}.replaced")
+
+
+def has_checkpoint(out: Path) -> bool:
+    return out.is_dir() and any(out.rglob("*.msgpack"))
+
+
+def give_back_replaced(out: Path) -> bool:
+    """Finish the work of an --overwrite of `out` that was killed (nothing else leaves `replaced_dir(out)` behind):
+    the earlier run is given back if the new one had no checkpoint yet (True is returned), and otherwise removed, as
+    that command would have done; either is said on stderr.  Nothing happens while another process holds `out`'s
+    lock."""
+    aside = replaced_dir(out)
+    if not aside.is_dir():
+        return False
+    try:
+        lock = lock_run_dir(out)
+    except OSError:  # the --overwrite is still running: its own clean-up decides
+        return False
+    try:
+        if not aside.is_dir():
+            return False
+        if has_checkpoint(out):
+            shutil.rmtree(aside)
+            print(f"removed {aside}: the run that an interrupted --overwrite of {out} replaced (the new run there "
+                  "has its checkpoints)", file=sys.stderr)
+            return False
+        if out.exists():
+            try:
+                new = saved_studies(out)
+            except (UsageError, OSError):
+                new = []
+            foreign = not_from_a_run(out, new) if out.is_dir() else [out.name]
+            if foreign:
+                raise UsageError(f"{aside} holds the run that an interrupted --overwrite of {out} was replacing, but "
+                                 f"{out} holds {', '.join(foreign[:3])}, which a run does not write: move them, then "
+                                 f"move {aside} back to {out}")
+            shutil.rmtree(out)
+        aside.rename(out)
+        print(f"the earlier run in {out} is given back: an --overwrite of it was stopped before the new run's first "
+              "checkpoint", file=sys.stderr)
+        return True
+    finally:
+        Path(lock.name).unlink(missing_ok=True)
+        lock.close()
 
 
 def check_resume_dir(path: Path) -> None:

@@ -140,10 +140,19 @@ def make_study(env: str, algo: str, level: str, args, extra: dict | None = None,
         variants = pretrain_variants(algo, args.pretrain, args)
         reference = LABELS["none"] if "none" in args.pretrain else None
     fields = study_fields(args) | (extra or {})
+    if args.dataset_path and "level" in getattr(args, "typed", ()):  # flags that would be ignored are refused
+        raise UsageError("--level names a generated dataset (<env>-<level>), and --dataset-path gives the data: "
+                         "leave one out")
     dataset = args.dataset_path or f"{env}-{level}"
     data_name = dataset_label(args.dataset_path) if args.dataset_path else f"{env}-{level}"
-    return Study(name=name or f"{data_name}-{algo}", dataset=dataset, env=env, variants=variants,
-                 reference=reference, **fields)
+    study = Study(name=name or f"{data_name}-{algo}", dataset=dataset, env=env, variants=variants,
+                  reference=reference, **fields)
+    for v in study.variants:
+        auto_only = sorted({"pretrain_auto_window", "pretrain_auto_tol"} & dict(v.overrides).keys())
+        if auto_only and not study.config(v.label).pretrain_auto:
+            raise UsageError(f"{', '.join('--' + f.replace('_', '-') for f in auto_only)} applies only to "
+                             "--pretrain-updates auto[:CAP]; give that too, or leave it out")
+    return study
 
 
 def dataset_label(dataset_path: str) -> str:

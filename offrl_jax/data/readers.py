@@ -352,9 +352,16 @@ def read_door_npz(path, env: str = "door", clip_actions: bool | None = None) -> 
     if "episode_lengths" not in data and all(k in data for k in D4RL_REQUIRED):  # an .npz with D4RL's keys
         return d4rl_arrays_to_dataset(path, data, None if env == "door" and not door_dims(data) else env,
                                       clip_actions=bool(clip_actions))
-    for key in ("observations", "actions", "rewards", "episode_lengths"):
+    found = ', '.join(sorted(data)) or 'none'
+    if "episode_lengths" not in data and any(k in data for k in ("terminals", "timeouts", "next_observations")):
+        key = next(k for k in D4RL_REQUIRED if k not in data)  # D4RL's keys, one missing: as the .hdf5 reader says
+        raise DatasetError(f"{path}: missing key '{key}' (found: {found})")
+    for key in ("observations", "actions", "rewards"):
         if key not in data:
-            raise DatasetError(f"{path}: missing key '{key}' (found: {', '.join(sorted(data)) or 'none'})")
+            raise DatasetError(f"{path}: missing key '{key}' (found: {found})")
+    if "episode_lengths" not in data:
+        raise DatasetError(f"{path}: missing key 'episode_lengths' (Adroit's demonstrations) or 'terminals' (D4RL's "
+                           f"keys) (found: {found})")
     check_lengths(path, {k: data[k] for k in ("observations", "actions", "rewards")})
     raw = np.asarray(data["episode_lengths"]).ravel()
     if raw.dtype.kind not in "iuf":

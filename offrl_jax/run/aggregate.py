@@ -137,7 +137,8 @@ def plot_aggregate(summaries: list[list[dict]], curves: list[list[dict]], path: 
     efficiency.set_ylabel("IQM score")
     for ax in (profile, efficiency):
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
+        if ax.get_legend_handles_labels()[0]:  # the curves' panel is empty where the studies share no evaluation
+            ax.legend(fontsize=8)
     fig.suptitle(f"{result['tasks']} studies; intervals: stratified bootstrap over each study's seeds", fontsize=9)
     fig.tight_layout()
     written = []

@@ -12,6 +12,7 @@ can tell which commit, which versions and which exact dataset made it:
 from __future__ import annotations
 
 import hashlib
+import json
 import platform
 import shlex
 import subprocess
@@ -90,3 +91,22 @@ def run_record(ds=None, source: str = "", sha256: str | None = None) -> dict[str
     if ds is not None:
         record["dataset"] = dataset_identity(ds, source, sha256)
     return record
+
+
+def recorded_data(config_path) -> str | None:
+    """The dataset SHA-256 that a run's config.json recorded last (None for runs that recorded none)."""
+    try:
+        runs = json.loads(config_path.read_text()).get("runs", [])
+        return next((r["dataset"]["sha256"] for r in reversed(runs) if isinstance(r.get("dataset"), dict)
+                     and isinstance(r["dataset"].get("sha256"), str)), None)
+    except (ValueError, AttributeError, TypeError, OSError):
+        return None
+
+
+def recorded_command(config_path) -> list[str] | None:
+    """The command line of a run's last start or resume, as its config.json recorded it (None where none was)."""
+    try:
+        runs = json.loads(config_path.read_text()).get("runs", [])
+        return shlex.split(runs[-1]["command"]) if runs and isinstance(runs[-1].get("command"), str) else None
+    except (ValueError, AttributeError, TypeError, OSError, KeyError):
+        return None

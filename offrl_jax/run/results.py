@@ -68,6 +68,14 @@ def check_curve_seeds(path: Path, rows: list[dict], seeds) -> None:
                              f"{', '.join(map(str, seeds))} (rows of another run?)")
 
 
+def check_curve_algos(path: Path, rows: list[dict], study) -> None:
+    """Raise ValueError (one line) if curves.csv rows name another algorithm for a variant than its study does."""
+    algos = {v.label: v.algo for v in study.variants}
+    if other := next((r for r in rows if "algo" in r and algos.get(r.get("variant"), r["algo"]) != r["algo"]), None):
+        raise ValueError(f"{path}: its {other['variant']} rows are {other['algo']}'s, where the run trains "
+                         f"{algos[other['variant']]} (rows of another run?)")
+
+
 def short_curves(rows: list[dict], budgets: dict[str, int]) -> dict[str, int | None]:
     """The variants whose evaluations in curves.csv `rows` end before their budget of updates (TD3 may trim an odd
     budget by 1): {variant: its last evaluated update, None when it has none}."""

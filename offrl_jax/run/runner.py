@@ -282,7 +282,9 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
                             f"{mean_score:.1f} | eval {time.perf_counter() - tic:.1f}s")
         # checkpoints go on after a partial divergence: on resume the diverged seeds' NaN scores keep them out
         # the first evaluation too: a variant with rows in curves.csv always has a checkpoint to resume from
-        if chunk.update - last_saved >= every or chunk.update == last_update or not ckpt_path.exists():
+        # every evaluation (`checkpoint_every` 0), or the first one past each multiple of `checkpoint_every`
+        due = not study.checkpoint_every or chunk.update // every > last_saved // every
+        if due or chunk.update == last_update or not ckpt_path.exists():
             if writer:
                 save_checkpoint(ckpt_path, host_states, chunk.update, chunk.seconds, rows, meta)
                 if study.keep_checkpoints:

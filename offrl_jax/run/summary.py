@@ -26,6 +26,7 @@ import numpy as np
 from offrl_jax.run import bc_level, stats
 from offrl_jax.run.results import (
     all_nan_expected,
+    check_curve_algos,
     check_curve_seeds,
     plot_curves,
     pretrain_ends_of,
@@ -295,6 +296,7 @@ def resummarize(run_dir: Path, behaviour: float | None = None) -> list[dict]:
     study = Study.from_json((run_dir / "config.json").read_text())
     rows = read_curves(run_dir / "curves.csv")
     check_curve_seeds(run_dir / "curves.csv", rows, study.seeds)
+    check_curve_algos(run_dir / "curves.csv", rows, study)
     if (run_dir / "summary.json").is_file():
         try:
             saved = json.loads((run_dir / "summary.json").read_text())
@@ -303,6 +305,22 @@ def resummarize(run_dir: Path, behaviour: float | None = None) -> list[dict]:
         except (json.JSONDecodeError, TypeError, AttributeError):
             pass
     return summarize(study, rows, pretrain_ends_of(rows), behaviour)
+
+
+def merged_differences(studies: list[Study]) -> list[str]:
+    """Hyper-parameters in which variants of one algorithm from different runs differ, besides their pre-training
+    (what the merged study compares): "field (label: value, ...)" each, for `merge_runs`'s caller to say."""
+    found = []
+    variants = [(i, v.algo, v.label, s.resolved()[v.label]) for i, s in enumerate(studies) for v in s.variants]
+    for algo in dict.fromkeys(a for _, a, _, _ in variants):
+        mine = [(i, label, config) for i, a, label, config in variants if a == algo]
+        if len({i for i, _, _ in mine}) < 2:
+            continue
+        for field in mine[0][2]:
+            values = {label: config.get(field) for _, label, config in mine}
+            if "pretrain" not in field and len({repr(v) for v in values.values()}) > 1:
+                found.append(f"{field} ({', '.join(f'{label}: {v}' for label, v in values.items())})")
+    return found
 
 
 def merge_runs(run_dirs: list[Path], out_dir: Path, behaviour: float | None = None) -> list[dict]:
@@ -336,6 +354,7 @@ def merge_runs(run_dirs: list[Path], out_dir: Path, behaviour: float | None = No
     for d, s in zip(run_dirs, studies):
         mine = read_curves(d / "curves.csv")
         check_curve_seeds(d / "curves.csv", mine, s.seeds)
+        check_curve_algos(d / "curves.csv", mine, s)
         short = short_curves(mine, {v.label: s.updates for v in s.variants})
         if short:
             raise ValueError(f"{d / 'curves.csv'}: ends before the run's {s.updates:,} updates ("

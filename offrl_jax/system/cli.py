@@ -168,6 +168,28 @@ def check_writable_file(path: Path) -> None:
     check_writable_dir(path.parent if str(path.parent) else Path("."))
 
 
+def lock_file(path: Path) -> Path:
+    """The OS lock of run directory `path` (`lock_run_dir`): a file beside it."""
+    path = Path(path).resolve()
+    return path.parent / f".{path.name}.lock"
+
+
+def being_written(path: Path) -> bool:
+    """Whether a process holds the lock of run directory `path` now (a run, a resume or an --overwrite of it)."""
+    import fcntl
+
+    try:
+        handle = open(lock_file(path))  # noqa: SIM115
+    except OSError:  # no lock file: nobody has it
+        return False
+    with handle:
+        try:
+            fcntl.flock(handle, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except BlockingIOError:
+            return True
+    return False
+
+
 def lock_run_dir(path: Path):
     """Hold an OS lock (flock) on `path` for as long as the returned file stays open (the process's life): a second
     process asking for the same run directory gets OSError at once.  The lock file sits beside the directory
@@ -177,7 +199,7 @@ def lock_run_dir(path: Path):
     path = Path(path).resolve()
     created = [p for p in reversed(path.parents) if not p.exists()]  # made here, outermost first
     path.parent.mkdir(parents=True, exist_ok=True)
-    handle = open(path.parent / f".{path.name}.lock", "a")  # noqa: SIM115  (kept open: it is the lock)
+    handle = open(lock_file(path), "a")  # noqa: SIM115  (kept open: it is the lock)
     handle.created_dirs = created  # the caller removes them (if still empty) with the lock
     try:
         fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
