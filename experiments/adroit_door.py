@@ -14,7 +14,7 @@ paper's 0.1 (Table 3) under any preset; the authors' door config has 1.0 (`--alp
 """
 import argparse
 
-from offrl_jax.algos import PRESETS, preset_values
+from offrl_jax.algos import PRESETS
 from offrl_jax.app.command import run_command
 from offrl_jax.app.flags import run_args
 from offrl_jax.app.studies import study_fields
@@ -42,13 +42,14 @@ def build(args) -> Study:
     for label in args.variants:
         algo, mode = VARIANTS[label]
         kw = {} if mode is None else {"pretrain": mode} | ({"pretrain_updates": pretrain} if mode != "none" else {})
+        flags = {}  # the flags that reach this variant
         if algo.startswith("edac") and args.num_critics:
-            kw["num_critics"] = args.num_critics
+            flags["num_critics"] = args.num_critics
         if args.alpha is not None and algo in ("td3bc", "td3bc_cql"):
-            kw["alpha"] = args.alpha
+            flags["alpha"] = args.alpha
         if args.balance is not None and algo in ("td3bc_cql", "edac_bc"):
-            kw["balance"] = args.balance
-        variants.append(Variant.of(label, algo, **(preset_values(args.preset, algo) | kw)))
+            flags["balance"] = args.balance
+        variants.append(Variant(label, algo, tuple(sorted((kw | flags).items())), args.preset, tuple(flags)))
     fields = study_fields(args) | {"updates": updates, "eval_every": every}
     return Study(name=f"adroit-{args.dataset}", dataset=args.dataset_path or args.dataset, env="door",
                  variants=tuple(variants), final_window=(pretrain, updates), **fields)

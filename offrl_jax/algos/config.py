@@ -16,7 +16,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from offrl_jax.algos.common import AutoStop
+from offrl_jax.algos.common import AutoStop, Stage, joint_schedule
 from offrl_jax.losses import BALANCES
 from offrl_jax.nets import INITS, Arch
 
@@ -86,6 +86,11 @@ class Config:
     def auto_stop(self, monitor: tuple[str, ...]) -> AutoStop | None:
         """The stopping rule of a pre-training phase that watches `monitor`, or None when it is fixed-length."""
         return AutoStop(monitor, self.pretrain_auto_window, self.pretrain_auto_tol) if self.pretrain_auto else None
+
+    def schedule(self, total_updates: int) -> list[Stage]:
+        """The phases of a run of `total_updates` updates, as plans (no networks needed): pre-training, when there is
+        any, then offline RL; a family that plans otherwise overrides this, and its algorithm's `phases` follows it."""
+        return joint_schedule(self, total_updates)
 
     def arch(self) -> Arch:
         """The layer-building choices (LayerNorm form, initialisation, a constant hidden bias if the family has one)."""

@@ -30,10 +30,11 @@ from offrl_jax.algos.common import (
     Phase,
     done_flags,
     gradient_step,
-    joint_pretraining,
     new_model,
     polyak,
+    pretrain_update,
     single,
+    stage_phases,
 )
 from offrl_jax.algos.config import Config, require
 from offrl_jax.nets import CriticEnsemble, DeterministicActor, GaussianActor, Value, gaussian_log_prob
@@ -98,8 +99,9 @@ class IQL:
         return out if self.cfg.deterministic else out[0]
 
     def phases(self, total_updates: int) -> list[Phase]:
-        phases, rl = joint_pretraining(self.cfg, self.bc_update, self.mc_update, total_updates)
-        return phases + [Phase("offline_rl", single(self.rl_update), rl)]
+        return stage_phases(self.cfg.schedule(total_updates), {
+            "offline_rl": single(self.rl_update),
+            "pretrain": pretrain_update(self.cfg.pretrain, self.bc_update, self.mc_update)})
 
     def neg_log_lik(self, params, batch: Batch) -> jax.Array:
         """(B,) the actor's per-row loss of the dataset action: squared error, or the Gaussian's -log-likelihood."""

@@ -28,13 +28,16 @@ from offrl_jax.algos.common import (
     Batch,
     Model,
     Phase,
+    Stage,
     bc_step,
     done_flags,
     first,
     gradient_step,
-    joint_pretraining,
+    joint_schedule,
     new_model,
     polyak,
+    pretrain_update,
+    stage_phases,
 )
 from offrl_jax.algos.config import Config, require
 from offrl_jax.nets import CriticEnsemble, DeterministicActor
@@ -73,6 +76,10 @@ class ReBRACConfig(Config):
              f"must be a multiple of policy_delay ({self.policy_delay})"),
         ])
 
+    def schedule(self, total_updates: int) -> list[Stage]:
+        """Pre-training, then offline RL with the actor updated once every `policy_delay` critic updates."""
+        return joint_schedule(self, total_updates, self.policy_delay)
+
 
 @struct.dataclass
 class ReBRACState:
@@ -102,10 +109,9 @@ class ReBRAC:
         return self.actor.apply(state.actor.params, obs)
 
     def phases(self, total_updates: int) -> list[Phase]:
-        cfg = self.cfg
-        phases, rl = joint_pretraining(cfg, self.bc_update, self.mc_update, total_updates)
-        rl -= rl % cfg.policy_delay
-        return phases + [Phase("offline_rl", self.rl_update, rl, updates_per_call=cfg.policy_delay)]
+        return stage_phases(self.cfg.schedule(total_updates), {
+            "offline_rl": self.rl_update,
+            "pretrain": pretrain_update(self.cfg.pretrain, self.bc_update, self.mc_update)})
 
     def td_target(self, state: ReBRACState, batch: Batch, key: jax.Array) -> jax.Array:
         cfg = self.cfg

@@ -32,7 +32,7 @@ from offrl_jax.data.dataset import DatasetError, rows_without_timeouts
 from offrl_jax.run.provenance import fingerprint
 from offrl_jax.run.resume import check_resume, edited_resolved
 from offrl_jax.run.runner import Diverged, run_study
-from offrl_jax.run.study import Study, Variant
+from offrl_jax.run.study import Study
 from offrl_jax.run.summary import print_table
 from offrl_jax.system.checkpoint import atomic_write_text
 from offrl_jax.system.cli import UsageError, check_writable_dir, lock_run_dir, one_line_warnings, print_error
@@ -86,7 +86,9 @@ def replay(saved: Study | list[Study], args, given: set[str], hparams: dict) -> 
         fields["dataset"] = str(args.dataset_path)
 
     def one(study: Study) -> Study:
-        variants = tuple(Variant.of(v.label, v.algo, **(dict(v.overrides) | hparams)) for v in study.variants)
+        variants = tuple(dataclasses.replace(v, overrides=tuple(sorted((dict(v.overrides) | hparams).items())),
+                                             flags=None if v.flags is None else (*v.flags, *hparams))
+                         for v in study.variants)
         return dataclasses.replace(study, variants=variants, **fields)
 
     return [one(s) for s in saved] if isinstance(saved, list) else one(saved)

@@ -12,7 +12,7 @@ import argparse
 import re
 from pathlib import Path
 
-from offrl_jax.algos import ALGOS, PRESETS, SACNConfig, preset_values
+from offrl_jax.algos import ALGOS, PRESETS, SACNConfig
 from offrl_jax.app.flags import FLAG_FIELDS, add_config_flags, config_values, run_args, sweepable_fields
 from offrl_jax.data.readers import FILE_SUFFIXES
 from offrl_jax.run.study import Study, Variant
@@ -111,27 +111,29 @@ def chosen(args) -> dict:
     return ({"preset": default} if default and not getattr(args, "preset", None) else {}) | given(args)
 
 
-def sweep_variants(label: str, algo: str, fixed: dict) -> tuple[Variant, ...]:
+def sweep_variants(label: str, algo: str, fixed: dict, flags: frozenset[str] = frozenset()) -> tuple[Variant, ...]:
     """One variant, or one per value of a swept flag (labels "pretrained alpha=2.5", ...); the runner trains a
-    sweep's variants as one program.  A "preset" entry of `fixed` is expanded into its values for `algo`
-    (every value is then recorded in the variant), under the other entries."""
+    sweep's variants as one program.  A "preset" entry of `fixed` is the variants' config preset, applied under the
+    other entries; the entries named in `flags` were given on the command line (the rest are the study's own)."""
     fixed = dict(fixed)
-    fixed = preset_values(fixed.pop("preset", None), algo) | fixed
-    return _sweep_variants(label, algo, fixed)
-
-
-def _sweep_variants(label: str, algo: str, fixed: dict) -> tuple[Variant, ...]:
+    preset = fixed.pop("preset", None)
     swept = [k for k in SWEPT if isinstance(fixed.get(k), list)]
     if not swept:
-        return (Variant.of(label, algo, **fixed),)
+        return (Variant(label, algo, tuple(sorted(fixed.items())), preset, tuple(flags)),)
     if len(swept) > 1:
         raise ValueError(f"sweep one hyper-parameter at a time, got several values for {' and '.join(swept)}")
     name = swept[0]
-    return tuple(Variant.of(f"{label} {name}={value:g}", algo, **(fixed | {name: value})) for value in fixed[name])
+    return tuple(Variant(f"{label} {name}={value:g}", algo, tuple(sorted((fixed | {name: value}).items())), preset,
+                         tuple(flags)) for value in fixed[name])
+
+
+def study_variants(label: str, algo: str, own: dict, args) -> tuple[Variant, ...]:
+    """`sweep_variants` of the study's own values `own` under the flags given (`chosen(args)`, which win)."""
+    return sweep_variants(label, algo, own | chosen(args), frozenset(overrides(args)))
 
 
 def pretrain_variants(algo: str, modes, args) -> tuple[Variant, ...]:
-    return tuple(v for mode in modes for v in sweep_variants(LABELS[mode], algo, {"pretrain": mode} | chosen(args)))
+    return tuple(v for mode in modes for v in study_variants(LABELS[mode], algo, {"pretrain": mode}, args))
 
 
 def make_study(env: str, algo: str, level: str, args, extra: dict | None = None,
