@@ -1,7 +1,7 @@
 """What `python -m experiments.<name>` does, as named steps: `run_command(build, parser, argv)`.
 
     1. read the command      flags checked; the study (or studies) built, replayed from --config, or read back for
-                             --resume
+                             --resume; with --dry-run, printed (`offrl_jax.app.dry_run`), and the command ends here
     2. start the processes   this process's CPU cores, a multi-process run's others (`offrl_jax.app.launch`)
     3. claim the output      the run directory chosen (`offrl_jax.app.outputs`), checked writable and locked
     4. load the data         every dataset once, before anything is written; bad data fails here
@@ -25,6 +25,7 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
+from offrl_jax.app.dry_run import describe
 from offrl_jax.app.launch import check_backend, start_local_processes, start_processes, use_cpu_cores
 from offrl_jax.app.outputs import check_resume_dir, output_dir, saved_studies, studies_json
 from offrl_jax.data import catalogue
@@ -42,11 +43,13 @@ Build = Callable[[argparse.Namespace], "Study | list[Study]"]
 
 _UNSET = object()
 PROCESS_FLAGS = frozenset({"processes", "distributed", "coordinator", "num_processes", "process_id"})
-RESUME_FLAGS = frozenset({"resume", "updates", "parallel", "no_progress", "clip_actions", "logger", *PROCESS_FLAGS})
+RESUME_FLAGS = frozenset({"resume", "updates", "parallel", "no_progress", "clip_actions", "logger", "dry_run",
+                          *PROCESS_FLAGS})
 # run flag destination -> the Study field it sets (seeds and --dataset-path are mapped in `replay`)
 RUN_FIELDS = ("updates", "eval_every", "eval_episodes", "batch_size", "checkpoint_every", "keep_checkpoints",
               "max_transitions", "clip_actions")
-REPLAY_FLAGS = frozenset({"config", "out", "overwrite", "parallel", "no_progress", "logger", "seeds", "seed_offset",
+REPLAY_FLAGS = frozenset({"config", "out", "overwrite", "parallel", "no_progress", "logger", "dry_run", "seeds",
+                          "seed_offset",
                           "dataset_path", *RUN_FIELDS, *PROCESS_FLAGS})
 
 
@@ -173,6 +176,10 @@ class Command:
         elif not self.resuming:
             # validates every hyper-parameter and budget; `typed`: the flags typed, a default value typed included
             self.built = build(argparse.Namespace(**vars(args), typed=frozenset(given)))
+        elif args.dry_run:  # what a resume would continue (the run directory is only read)
+            self.built = saved_studies(args.resume)
+            if "updates" in given:
+                self.built = extend(self.built, args.updates)
 
     # 2. start the processes
     def start_processes(self) -> None:
@@ -292,6 +299,10 @@ def run_command(build: Build, parser: argparse.ArgumentParser, argv=None,
     ok, code = False, 1
     try:
         command.read(build, hparams, hparam_dests)
+        if command.args.dry_run:
+            print(describe(command.studies))
+            ok = True
+            return 0
         command.start_processes()
         command.claim_output()
         data = command.load()

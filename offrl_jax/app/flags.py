@@ -229,6 +229,10 @@ def run_args(parser: argparse.ArgumentParser, updates: int | None, eval_every: i
                    help="variants trained at once (default %(default)s); on the CPU each in a process pinned to its "
                         "own core(s), on a GPU in threads; 1 = one after another, each splitting its seeds over "
                         "every core")
+    g.add_argument("--dry-run", action="store_true",
+                   help="print every variant's resolved config (each value, and where it came from: default, algo, "
+                        "per-env, preset, study or flag), the budget and the phases, then exit: nothing is written, "
+                        "loaded or trained")
     g.add_argument("--no-progress", action="store_true",
                    help="no progress bar: one plain line per evaluation instead (for batch logs)")
     m = parser.add_argument_group("many processes or hosts (jax.distributed; offrl_jax/system/distributed.py)")
