@@ -51,8 +51,7 @@ def build(args):
 
 
 def make_parser():
-    p = parser("experiments.figure2", __doc__, updates=30_000, eval_every=2_500, edac_pretrain=EDAC_PRETRAIN,
-               omit=("env", "algo"), num_critics="10, EDAC only")
+    p = parser("experiments.figure2", __doc__, updates=30_000, eval_every=2_500, omit=("env", "algo"))
     p.add_argument("--envs", nargs="+", choices=ENVS, default=list(ENVS),
                    help="MuJoCo tasks, one study per task and algorithm (default: hopper halfcheetah walker2d)")
     for action in p._actions:  # build() gives ReBRAC 1024 when --batch-size is at its default

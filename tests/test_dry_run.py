@@ -1,5 +1,6 @@
 """--dry-run shows what a study will run: each value it prints is the value a run of the same command records in its
 config.json (`resolved`, and where it came from: `sources`), and it writes, loads and trains nothing."""
+import ast
 import json
 import re
 from pathlib import Path
@@ -103,3 +104,65 @@ def test_dry_run_of_a_resume_shows_the_saved_run(tmp_path, datasets):
     assert dry.returncode == 0, dry.stderr
     assert "budget: 400 updates per variant" in dry.stdout and printed(dry.stdout) == recorded(out)
     assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
+
+
+OPTION = re.compile(r" (?=--[a-z][a-z0-9-]*(?: [A-Z{\[]|, --))")  # where --help starts an option's entry
+
+
+def stated_defaults(help_text: str) -> dict[str, tuple[str | None, list[tuple[str | None, str | None, object]]]]:
+    """{field: (the env its default is stated for, or None for every env, [(algo, label, value)])} of each option
+    whose help ends with its default for the study's own algorithm ("with --algo X" ones are left out)."""
+    found = {}
+    for entry in OPTION.split(" ".join(help_text.split())):
+        flag, _, text = entry.partition(" ")
+        if "Default: " not in text or not flag.startswith("--"):
+            continue
+        stated = re.sub(r" \(preset [\w, ]+\)$", "", text.rsplit("Default: ", 1)[1])
+        if stated.startswith("with --algo"):
+            continue
+        env = None
+        if match := re.fullmatch(r"(.*) on (\w+) \(.*\)", stated):
+            stated, env = match[1], match[2]
+        parts = re.findall(r"(.+?) for ([a-z0-9_]+)(?: ([^,\s]+))?(?:, |$)", stated)
+        values = [(algo, label or None, part) for part, algo, label in parts] or [(None, None, stated)]
+        try:
+            found[flag[2:].rstrip(",").replace("-", "_")] = (
+                env, [(a, label, ast.literal_eval(v)) for a, label, v in values])
+        except (ValueError, SyntaxError):  # not a value (a run flag's prose default)
+            continue
+    return found
+
+
+def plain(value):
+    return [plain(x) for x in value] if isinstance(value, (list, tuple)) else value
+
+
+@pytest.mark.parametrize("module", [m for m in STUDIES if m != "experiments.adroit_door"])
+def test_help_states_the_default_the_study_runs(module):
+    """For every hyper-parameter flag, --help's default (for the study's default env and preset) is the value its
+    dry run shows for every variant that has the field; a per-env field names its default env."""
+    shown = run_module(module, "--help")
+    dry = run_module(module, "--dry-run")
+    assert shown.returncode == 0 and dry.returncode == 0, shown.stderr + dry.stderr
+    runs = [(name.rsplit("-", 1)[-1], name, variants) for name, variants in printed(dry.stdout).items()]
+    env_of = {name: next(e for e in ("halfcheetah", "walker2d", "hopper") if e in name) for _, name, _ in runs}
+    stated = stated_defaults(shown.stdout)
+    assert {"alpha", "gamma", "num_critics", "tau"} <= set(stated), sorted(stated)
+    checked = 0
+    for field, (env, values) in stated.items():
+        for algo, name, variants in runs:
+            if env is not None and env_of[name] != env:
+                continue
+            for label, config in variants.items():
+                if field not in config:
+                    continue
+                want = [v for a, lab, v in values if a in (None, algo) and lab in (None, label)]
+                assert want, f"{module} --{field}: no default stated for {algo} {label}"
+                assert plain(want[0]) == plain(config[field][0]), (module, field, env, algo, label)
+                checked += 1
+    assert checked > 0
+    if module == "experiments.mujoco_medium":
+        assert stated["alpha"] == (None, [(None, None, 2.5)]) and "Default: published" in shown.stdout
+    if module == "experiments.ablation":  # the paper's per-env alphas, hopper's first
+        assert stated["alpha"] == ("hopper", [(None, None, 10.0)])
+        assert "Default: none" in " ".join(shown.stdout.split())

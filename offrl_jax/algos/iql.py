@@ -45,7 +45,7 @@ class IQLConfig(Config):
     actor_layer_norm: bool = False  # IQL: no LayerNorm
     critic_layer_norm: bool = False
     init: str = "torch"
-    expectile: float = 0.7  # the V regression's expectile (IQL's tau; MuJoCo 0.7)
+    expectile: float = 0.7  # the V regression's expectile (IQL's tau)
     beta: float = 3.0  # the AWR inverse temperature (0: behaviour cloning)
     max_weight: float = 100.0  # clip of exp(beta A)
     value_lr: float = 3e-4  # Adam learning rate of V

@@ -51,9 +51,9 @@ class ReBRACConfig(Config):
     actor_layer_norm: bool = False  # ReBRAC: LayerNorm in the critic only
     init: str = "torch"
     timeouts: str = "drop"
-    # ReBRAC's behaviour penalty in the actor loss (per env: hopper 0.01, halfcheetah 0.001, walker2d 0.05)
+    # ReBRAC's behaviour penalty in the actor loss (its published per-env values: ENV_DEFAULTS)
     actor_beta: float = 1.0
-    # ReBRAC's behaviour penalty in the critic's target (per env: hopper 0.01, halfcheetah 0.01, walker2d 0.1)
+    # ReBRAC's behaviour penalty in the critic's target (its published per-env values: ENV_DEFAULTS)
     critic_beta: float = 1.0
     policy_noise: float = 0.2  # std of the target policy smoothing noise
     noise_clip: float = 0.5  # clip of the target policy smoothing noise

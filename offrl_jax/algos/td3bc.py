@@ -43,7 +43,7 @@ from offrl_jax.nets import CriticEnsemble, DeterministicActor
 
 @dataclasses.dataclass(frozen=True)
 class TD3BCConfig(Config):
-    alpha: float = 2.5  # TD3+BC's actor regularisation (hopper 10, halfcheetah 20, walker2d 5, Adroit 0.1 / pen 1)
+    alpha: float = 2.5  # TD3+BC's actor regularisation (TD3+BC's published value; the paper's per env: ENV_DEFAULTS)
     policy_noise: float = 0.2  # std of the target policy smoothing noise
     noise_clip: float = 0.5  # clip of the target policy smoothing noise
     policy_delay: int = 2  # critic updates per actor and target update (TD3)

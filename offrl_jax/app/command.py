@@ -25,7 +25,7 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from offrl_jax.app.dry_run import describe
+from offrl_jax.app.dry_run import describe, state_defaults
 from offrl_jax.app.launch import check_backend, start_local_processes, start_processes, use_cpu_cores
 from offrl_jax.app.outputs import check_resume_dir, output_dir, saved_studies, studies_json
 from offrl_jax.data import catalogue
@@ -294,6 +294,7 @@ def run_command(build: Build, parser: argparse.ArgumentParser, argv=None,
 
     For --config: `hparam_dests` are the flags that set single hyper-parameters, and `hparams(args)` the overrides
     they make ({config field: value}, None for a flag not given)."""
+    state_defaults(parser, build)  # --help's "Default:" of each hyper-parameter: what the study gives it
     command = Command(parser.parse_args(argv), parser, argv)
     one_line_warnings()
     ok, code = False, 1

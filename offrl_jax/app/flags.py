@@ -123,9 +123,10 @@ def add_config_flags(parser: argparse.ArgumentParser, omit: typing.Iterable[str]
         defaults = entry["defaults"]
         shown = (f"{next(iter(defaults.values()))!r}" if len(set(map(repr, defaults.values()))) == 1 else
                  ", ".join(f"{family} {value!r}" for family, value in defaults.items()))
-        text = entry["comment"] + (". " if entry["comment"] else "") + f"Default: {shown}"
+        text = entry["comment"] + (". " if entry["comment"] else "")
         if entry["sweepable"]:
-            text += "; several values = a sweep, vmapped in one program"
+            text += "Several values = a sweep, vmapped in one program. "
+        text += f"Default: {shown}"
         group.add_argument(f"--{name.replace('_', '-')}", *ALIASES.get(name, ()), dest=name, default=None,
                            help=text.replace("%", "%%"), **_argument(name, entry["type"], entry["sweepable"]))
         dests.append(name)
