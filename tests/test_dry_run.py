@@ -67,7 +67,8 @@ def recorded(out: Path) -> dict[str, dict[str, dict[str, tuple]]]:
     return found
 
 
-@pytest.mark.parametrize("module", STUDIES)
+@pytest.mark.parametrize("module", [pytest.param(m, marks=pytest.mark.slow) if m == "experiments.adroit_door" else m
+                                    for m in STUDIES])  # adroit_door: 30 evaluations on door at any --scale (~2 min)
 def test_dry_run_prints_what_the_run_records_and_writes_nothing(module, datasets, tmp_path):
     argv = [a.format(**datasets) for a in STUDIES[module]]
     dry = run_module(module, *argv, "--out", tmp_path / "dry", "--dry-run", cwd=tmp_path)

@@ -76,16 +76,22 @@ def _family_name(cls: type) -> str:
 
 
 def _fields(configs: tuple[type, ...] = CONFIGS) -> dict[str, dict[str, Any]]:
-    """Every config field once (the first config's order first): type, per-class defaults, comment, sweepability."""
+    """Every config field once (the first config's order first): type, per-class defaults, comment, sweepability.
+    All families share one flag per field name, parsed by one type: a family that declares a field of another's
+    name with another type is refused (ValueError naming both), as it would be parsed by the other's type."""
     found: dict[str, dict[str, Any]] = {}
     for cls in configs:
         hints, comments = typing.get_type_hints(cls), field_comments(cls)
         for f in dataclasses.fields(cls):
             entry = found.setdefault(f.name, {"type": hints[f.name], "defaults": {}, "comment": "",
-                                              "sweepable": False})
+                                              "sweepable": False, "declared": cls})
+            if hints[f.name] != entry["type"]:
+                raise ValueError(f"{cls.__name__}.{f.name} is {hints[f.name]} but {entry['declared'].__name__}."
+                                 f"{f.name} is {entry['type']}: one --{f.name.replace('_', '-')} flag cannot parse "
+                                 "both; give the field another name")
             entry["defaults"][_family_name(cls)] = f.default
             entry["comment"] = entry["comment"] or comments.get(f.name, "")
-            entry["sweepable"] |= f.name in cls.SWEEPABLE
+            entry["sweepable"] |= f.name in getattr(cls, "SWEEPABLE", ())
     return found
 
 
