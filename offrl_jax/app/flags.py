@@ -120,8 +120,9 @@ def add_config_flags(parser: argparse.ArgumentParser, omit: typing.Iterable[str]
     """One flag per field of `configs` (but `NOT_FLAGS` and `omit`), in a group of their own; returns their
     destinations, which are the field names."""
     group = parser.add_argument_group(
-        "hyper-parameters", "every field of the algorithm's config (offrl_jax/algos/); not given = the per-env "
-        "default (offrl_jax.algos.ENV_DEFAULTS) or the config's own; a field the algorithm does not have is refused")
+        "hyper-parameters", "every field of the algorithm's config (offrl_jax/algos/); not given = what the study "
+        "gives it (each Default below: a preset's, the per-env table's or the config's own; --dry-run shows every "
+        "value and where it came from); a field the algorithm does not have is refused")
     dests = []
     for name, entry in _fields(configs).items():
         if name in NOT_FLAGS or name in omit:
