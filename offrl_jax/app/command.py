@@ -176,7 +176,7 @@ class Command:
         elif not self.resuming:
             # validates every hyper-parameter and budget; `typed`: the flags typed, a default value typed included
             self.built = build(argparse.Namespace(**vars(args), typed=frozenset(given)))
-        elif args.dry_run:  # what a resume would continue (the run directory is only read)
+        elif getattr(args, "dry_run", False):  # what a resume would continue (the run directory is only read)
             self.built = saved_studies(args.resume)
             if "updates" in given:
                 self.built = extend(self.built, args.updates)
@@ -300,7 +300,7 @@ def run_command(build: Build, parser: argparse.ArgumentParser, argv=None,
     ok, code = False, 1
     try:
         command.read(build, hparams, hparam_dests)
-        if command.args.dry_run:
+        if getattr(command.args, "dry_run", False):
             print(describe(command.studies))
             ok = True
             return 0
