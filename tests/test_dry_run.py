@@ -12,6 +12,7 @@ import pytest
 from tests.conftest import synthetic_dataset
 from tests.entry import run_module
 
+ROOT = Path(__file__).resolve().parents[1]
 FIELD = re.compile(r"^    (\w+) = (.+)  \(([\w-]+)\)$")
 TINY = ["--seeds", "1", "--eval-episodes", "1", "--batch-size", "32", "--no-progress", "--parallel", "1"]
 MUJOCO = [*TINY, "--updates", "200", "--eval-every", "100", "--pretrain-updates", "100", "--hidden", "16", "16"]
@@ -71,14 +72,15 @@ def recorded(out: Path) -> dict[str, dict[str, dict[str, tuple]]]:
                                     for m in STUDIES])  # adroit_door: 30 evaluations on door at any --scale (~2 min)
 def test_dry_run_prints_what_the_run_records_and_writes_nothing(module, datasets, tmp_path):
     argv = [a.format(**datasets) for a in STUDIES[module]]
-    dry = run_module(module, *argv, "--out", tmp_path / "dry", "--dry-run", cwd=tmp_path)
+    # in a folder of its own (a plain `python -m` there, the work tree on its path), where runs/ would appear
+    dry = run_module(module, *argv, "--out", tmp_path / "dry", "--dry-run", cwd=tmp_path, env={"PYTHONPATH": str(ROOT)})
     assert dry.returncode == 0, dry.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == []  # no --out, no runs/, no dataset cache here
     shown = printed(dry.stdout)
     assert shown and all(shown.values()) and all(v for s in shown.values() for v in s.values())
     assert "budget: 200 updates per variant" in dry.stdout or module == "experiments.adroit_door"
     assert "phases: " in dry.stdout
-    run = run_module(module, *argv, "--out", tmp_path / "run", cwd=tmp_path, timeout=600)
+    run = run_module(module, *argv, "--out", tmp_path / "run", timeout=600)
     assert run.returncode == 0, run.stderr
     assert shown == recorded(tmp_path / "run")
 
