@@ -198,3 +198,15 @@ def test_a_studys_budget_check_builds_no_algorithm(monkeypatch):
     with pytest.raises(ValueError, match="phase 'offline_rl' updates the actor once every 2 critic updates"):
         Study(name="t", dataset="hopper-medium", env="hopper", seeds=(0,), updates=10_000, eval_every=1_001,
               variants=(Variant.of("a", "td3bc", pretrain="none"),))
+
+
+def test_each_family_builds_its_layers_from_its_own_fields():
+    """The shared Config.arch reads only the shared fields; SACN and ReBRAC add their constant hidden bias."""
+    from offrl_jax.algos.config import Config
+
+    assert make_config("td3bc", "hopper").arch() == Config.arch(make_config("td3bc", "hopper"))
+    assert make_config("td3bc", "hopper").arch().hidden_bias is None
+    assert make_config("edac", "hopper").arch().hidden_bias is None
+    assert make_config("edac", "hopper", preset="authors").arch().hidden_bias == 0.1
+    assert make_config("rebrac", "hopper").arch().hidden_bias == 0.1
+    assert dataclasses.replace(make_config("rebrac", "hopper"), hidden_bias=None).arch().hidden_bias is None

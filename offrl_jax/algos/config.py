@@ -93,9 +93,14 @@ class Config:
         return joint_schedule(self, total_updates)
 
     def arch(self) -> Arch:
-        """The layer-building choices (LayerNorm form, initialisation, a constant hidden bias if the family has one)."""
-        return Arch(layer_norm_affine=self.layer_norm_affine, layer_norm_eps=self.layer_norm_eps, init=self.init,
-                    hidden_bias=getattr(self, "hidden_bias", None))
+        """The layer-building choices (LayerNorm form, initialisation); a family with a constant hidden bias adds it
+        (`arch_with_bias`)."""
+        return Arch(layer_norm_affine=self.layer_norm_affine, layer_norm_eps=self.layer_norm_eps, init=self.init)
+
+
+def arch_with_bias(cfg: Config) -> Arch:
+    """`cfg.arch()` with the family's constant hidden-layer bias (`hidden_bias`, a field of SACN's and ReBRAC's)."""
+    return dataclasses.replace(Config.arch(cfg), hidden_bias=cfg.hidden_bias)
 
 
 def require(cfg: Any, checks: list[tuple[str, bool, str]]) -> None:

@@ -39,8 +39,8 @@ from offrl_jax.algos.common import (
     pretrain_update,
     stage_phases,
 )
-from offrl_jax.algos.config import Config, require
-from offrl_jax.nets import CriticEnsemble, DeterministicActor
+from offrl_jax.algos.config import Config, arch_with_bias, require
+from offrl_jax.nets import Arch, CriticEnsemble, DeterministicActor
 
 
 @dataclasses.dataclass(frozen=True)
@@ -75,6 +75,9 @@ class ReBRACConfig(Config):
             ("pretrain_auto_window", not self.pretrain_auto or self.pretrain_auto_window % self.policy_delay == 0,
              f"must be a multiple of policy_delay ({self.policy_delay})"),
         ])
+
+    def arch(self) -> Arch:
+        return arch_with_bias(self)
 
     def schedule(self, total_updates: int) -> list[Stage]:
         """Pre-training, then offline RL with the actor updated once every `policy_delay` critic updates."""

@@ -36,10 +36,11 @@ from offrl_jax.algos.common import (
     stage_phases,
     uniform_actions,
 )
-from offrl_jax.algos.config import Config, check_cql_fields, require
+from offrl_jax.algos.config import Config, arch_with_bias, check_cql_fields, require
 from offrl_jax.data.returns import soft_returns_to_go
 from offrl_jax.nets import (
     TANH_LOG_DETS,
+    Arch,
     CriticEnsemble,
     TanhGaussianActor,
     sample_tanh_gaussian,
@@ -100,6 +101,9 @@ class SACNConfig(Config):
             ("bc_weight", self.bc_weight >= 0, "must be >= 0 (0 = off)"),
             ("cql_alpha", self.cql_alpha >= 0, "must be >= 0 (0 = off)"),
         ])
+
+    def arch(self) -> Arch:
+        return arch_with_bias(self)
 
     def schedule(self, total_updates: int) -> list[Stage]:
         """Pre-training in two phases, soft BC ("actor_pretrain", `actor_pretrain_fraction` of `pretrain_updates`)
