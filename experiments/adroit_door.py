@@ -14,7 +14,7 @@ paper's 0.1 (Table 3) under any preset; the authors' door config has 1.0 (`--alp
 """
 import argparse
 
-from offrl_jax.algos import PRESETS, preset_values
+from offrl_jax.algos import PRESETS, env_defaults
 from offrl_jax.app.command import run_command
 from offrl_jax.app.flags import run_args
 from offrl_jax.app.studies import study_fields
@@ -37,18 +37,22 @@ VARIANTS = {
 
 def build(args) -> Study:
     s = args.scale
-    updates, pretrain, every = int(300_000 * s), int(200_000 * s), max(1, int(10_000 * s))
+    # the paper's protocol, scaled: 300k updates, evaluation every 10k, the score over the last 100k; pre-training
+    # as long as the paper's per-env value (`offrl_jax.algos.ENV_DEFAULTS`: 200k on door)
+    scaled = lambda algo: int(env_defaults(algo, "door")["pretrain_updates"] * s)  # noqa: E731
+    updates, pretrain, every = int(300_000 * s), scaled("td3bc_cql"), max(1, int(10_000 * s))
     variants = []
     for label in args.variants:
         algo, mode = VARIANTS[label]
-        kw = {} if mode is None else {"pretrain": mode} | ({"pretrain_updates": pretrain} if mode != "none" else {})
+        kw = {} if mode is None else {"pretrain": mode} | ({"pretrain_updates": scaled(algo)} if mode != "none" else {})
+        flags = {}  # the flags that reach this variant
         if algo.startswith("edac") and args.num_critics:
-            kw["num_critics"] = args.num_critics
+            flags["num_critics"] = args.num_critics
         if args.alpha is not None and algo in ("td3bc", "td3bc_cql"):
-            kw["alpha"] = args.alpha
+            flags["alpha"] = args.alpha
         if args.balance is not None and algo in ("td3bc_cql", "edac_bc"):
-            kw["balance"] = args.balance
-        variants.append(Variant.of(label, algo, **(preset_values(args.preset, algo) | kw)))
+            flags["balance"] = args.balance
+        variants.append(Variant(label, algo, tuple(sorted((kw | flags).items())), args.preset, tuple(flags)))
     fields = study_fields(args) | {"updates": updates, "eval_every": every}
     return Study(name=f"adroit-{args.dataset}", dataset=args.dataset_path or args.dataset, env="door",
                  variants=tuple(variants), final_window=(pretrain, updates), **fields)

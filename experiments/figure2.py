@@ -11,11 +11,11 @@ takes ~10 s per 1k updates, critic pre-training ~190-290 s and EDAC ~480 s, so t
 
     python -m experiments.figure2 [--envs hopper] [--algos td3bc] [--edac-updates 50000] [--seeds 2]
 """
+from dataclasses import replace
 
 from offrl_jax.app.command import run_command
 from offrl_jax.app.flags import BATCH_SIZE
 from offrl_jax.app.studies import ENVS, LABELS, make_study, parser, pretrain_variants
-from offrl_jax.run.study import Variant
 from offrl_jax.system.cli import positive_int
 
 # Unless given on the command line: 3k soft BC + 9k soft-return critic updates.  The critic starts near 0 (EDAC's
@@ -35,11 +35,12 @@ def build(args):
         for algo in args.algos:
             variants, extra = pretrain_variants(algo, args.pretrain, args), {}
             if algo in ("td3bc", "rebrac", "iql"):  # --num-critics is EDAC's ensemble; these keep their two critics
-                variants = tuple(Variant.of(v.label, v.algo, **{k: x for k, x in v.overrides if k != "num_critics"})
+                variants = tuple(replace(v, overrides=tuple((k, x) for k, x in v.overrides if k != "num_critics"))
                                  for v in variants)
             if algo == "edac":  # 10 critics on a CPU unless --num-critics says otherwise
                 n = args.num_critics or 10
-                variants = tuple(Variant.of(v.label, v.algo, **edac_overrides(dict(v.overrides), n)) for v in variants)
+                variants = tuple(replace(v, overrides=tuple(sorted(edac_overrides(dict(v.overrides), n).items())))
+                                 for v in variants)
                 extra = {"updates": args.edac_updates, "eval_every": args.edac_eval_every}
             if algo == "rebrac" and args.batch_size == BATCH_SIZE:  # the flag's default: ReBRAC's own batch
                 extra = {"batch_size": 1024}
@@ -50,8 +51,7 @@ def build(args):
 
 
 def make_parser():
-    p = parser("experiments.figure2", __doc__, updates=30_000, eval_every=2_500, edac_pretrain=EDAC_PRETRAIN,
-               omit=("env", "algo"), num_critics="10, EDAC only")
+    p = parser("experiments.figure2", __doc__, updates=30_000, eval_every=2_500, omit=("env", "algo"))
     p.add_argument("--envs", nargs="+", choices=ENVS, default=list(ENVS),
                    help="MuJoCo tasks, one study per task and algorithm (default: hopper halfcheetah walker2d)")
     for action in p._actions:  # build() gives ReBRAC 1024 when --batch-size is at its default

@@ -9,15 +9,14 @@ mixing.
 """
 
 from offrl_jax.app.command import run_command
-from offrl_jax.app.studies import chosen, make_study, parser, sweep_variants
+from offrl_jax.app.studies import make_study, parser, study_variants
 
 
 def build(args):
-    extra = chosen(args)
     variants = tuple(v for lam in args.lambdas
-                     for v in sweep_variants(f"lambda={lam:g}", args.algo,
-                                             {"pretrain": "actor+critic", "lam": lam} | extra))
-    variants += sweep_variants("scratch", args.algo, {"pretrain": "none"} | extra)
+                     for v in study_variants(f"lambda={lam:g}", args.algo, {"pretrain": "actor+critic", "lam": lam},
+                                             args))
+    variants += study_variants("scratch", args.algo, {"pretrain": "none"}, args)
     return make_study(args.env, args.algo, args.level, args, variants=variants, reference="scratch",
                       name=f"lambda-{args.env}-{args.level}-{args.algo}")
 

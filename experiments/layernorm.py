@@ -7,7 +7,7 @@ variant, evaluation every 2k (8 runs in all: ~1 hour on 2 cores; pass --env to r
 """
 
 from offrl_jax.app.command import run_command
-from offrl_jax.app.studies import chosen, make_study, parser, sweep_variants
+from offrl_jax.app.studies import make_study, parser, study_variants
 
 COMBOS = {"LN actor+critic": (True, True), "LN actor only": (True, False), "LN critic only": (False, True),
           "no LN": (False, False)}
@@ -15,12 +15,11 @@ COMBOS = {"LN actor+critic": (True, True), "LN actor only": (True, False), "LN c
 
 def build(args):
     envs = [args.env] if args.env else ["hopper", "halfcheetah"]
-    extra = chosen(args)
     studies = []
     for env in envs:
         variants = tuple(v for label, (a, c) in COMBOS.items()
-                         for v in sweep_variants(label, args.algo, {"pretrain": "none", "actor_layer_norm": a,
-                                                                    "critic_layer_norm": c} | extra))
+                         for v in study_variants(label, args.algo, {"pretrain": "none", "actor_layer_norm": a,
+                                                                    "critic_layer_norm": c}, args))
         studies.append(make_study(env, args.algo, args.level, args, variants=variants, reference="LN actor+critic",
                                   name=f"layernorm-{env}-{args.level}-{args.algo}"))
     return studies if len(studies) > 1 else studies[0]

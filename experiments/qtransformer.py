@@ -8,14 +8,14 @@ evaluation every 2k (~30 min on one core).  The paper: 1M updates.
 """
 
 from offrl_jax.app.command import run_command
-from offrl_jax.app.studies import chosen, make_study, parser, sweep_variants
+from offrl_jax.app.studies import make_study, parser, study_variants
 
 
 def build(args):
-    extra = chosen(args)  # the max(MC, Q) target is TD3+BC's (`TD3BCConfig.target`)
-    variants = (sweep_variants("pretrained", "td3bc", {"pretrain": "actor+critic"} | extra)
-                + sweep_variants("max(MC,Q) target", "td3bc", {"pretrain": "none", "target": "max_mc"} | extra)
-                + sweep_variants("scratch", "td3bc", {"pretrain": "none"} | extra))
+    # the max(MC, Q) target is TD3+BC's (`TD3BCConfig.target`)
+    variants = (study_variants("pretrained", "td3bc", {"pretrain": "actor+critic"}, args)
+                + study_variants("max(MC,Q) target", "td3bc", {"pretrain": "none", "target": "max_mc"}, args)
+                + study_variants("scratch", "td3bc", {"pretrain": "none"}, args))
     return make_study(args.env, "td3bc", args.level, args, variants=variants, reference="scratch",
                       name=f"qtransformer-{args.env}-{args.level}-td3bc")
 

@@ -114,8 +114,8 @@ def test_a_run_resolves_each_config_once(monkeypatch, tmp_path, tiny_dataset):
     from offrl_jax.run.study import Study, Variant
 
     calls = []
-    real = study_module.make_config
-    monkeypatch.setattr(study_module, "make_config", lambda *a, **k: calls.append(a[0]) or real(*a, **k))
+    real = study_module.resolve
+    monkeypatch.setattr(study_module, "resolve", lambda *a, **k: calls.append(a[0]) or real(*a, **k))
     study = Study(name="t", dataset="synthetic", env="hopper", seeds=(0,), updates=200, eval_every=100,
                   eval_episodes=1, batch_size=32,
                   variants=(Variant.of("a", "td3bc", hidden=(16, 16), pretrain_updates=100),

@@ -193,18 +193,22 @@ def test_authors_preset_values_and_precedence():
 def test_authors_preset_from_the_command_line():
     from experiments import adroit_door, mujoco_medium
 
-    args = mujoco_medium.make_parser().parse_args([])
-    default = dict(mujoco_medium.build(args).variants[0].overrides)
-    assert default["alpha"] == 2.5 and "init" not in default  # the main job's own alpha, the library's defaults
-    args = mujoco_medium.make_parser().parse_args(["--preset", "authors", "--timeouts", "drop"])
-    for v in mujoco_medium.build(args).variants:
-        o = dict(v.overrides)
-        assert "alpha" not in o and o["init"] == "torch" and o["timeouts"] == "drop"  # per-env alpha: hopper 10
-        assert o["actor_hidden"] == (256, 256, 256)
+    def resolved(study, label=None):  # {field: (value, where it came from)} of a variant
+        label = label or study.variants[0].label
+        return {k: (getattr(study.config(label), k), source) for k, source in study.sources()[label].items()}
+
+    default = resolved(mujoco_medium.build(mujoco_medium.make_parser().parse_args([])))
+    # the main job's own alpha (its default preset), the library's defaults
+    assert default["alpha"] == (2.5, "preset") and default["init"] == ("flax", "default")
+    study = mujoco_medium.build(mujoco_medium.make_parser().parse_args(["--preset", "authors", "--timeouts", "drop"]))
+    for v in study.variants:
+        r = resolved(study, v.label)
+        assert r["alpha"] == (10.0, "per-env") and r["init"] == ("torch", "preset")  # per-env alpha: hopper 10
+        assert r["timeouts"] == ("drop", "flag") and r["actor_hidden"] == ((256, 256, 256), "preset")
     p = mujoco_medium.make_parser()
     studies = mujoco_medium.build(p.parse_args(["--preset", "paper", "authors"]))
-    assert len(studies) == 6 and all(dict(v.overrides)["balance"] == "signed" for s in studies for v in s.variants)
+    assert len(studies) == 6 and all(s.config(v.label).balance == "signed" for s in studies for v in s.variants)
     (study,) = [adroit_door.build(adroit_door.make_parser().parse_args(
         ["--preset", "authors", "--variants", "TD3+BC+CQL", "--balance", "abs"]))]
-    o = dict(study.variants[0].overrides)
-    assert o["balance"] == "abs" and o["init"] == "torch"
+    o = resolved(study)
+    assert o["balance"] == ("abs", "flag") and o["init"] == ("torch", "preset")

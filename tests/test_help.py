@@ -108,3 +108,24 @@ def test_string_config_flags_offer_what_the_config_accepts():
                 cls(**{name: value})
             with pytest.raises(ValueError, match=name):
                 cls(**{name: "not-a-choice"})
+
+
+def test_a_family_reusing_a_field_name_with_another_type_is_refused():
+    """All families share one flag per field name: a new family's `alpha: int` would be parsed as TD3+BC's float."""
+    from offrl_jax.algos import SACNConfig, TD3BCConfig
+    from offrl_jax.algos.config import Config
+
+    @dataclasses.dataclass(frozen=True)
+    class ClashConfig(Config):
+        alpha: int = 3
+
+    @dataclasses.dataclass(frozen=True)
+    class SameConfig(Config):
+        alpha: float = 1.0  # the same name and type: one flag serves both
+
+    with pytest.raises(ValueError, match="ClashConfig.alpha is <class 'int'> but TD3BCConfig.alpha is <class "
+                                         "'float'>: one --alpha flag cannot parse both"):
+        flags.add_config_flags(argparse.ArgumentParser(), configs=(TD3BCConfig, SACNConfig, ClashConfig))
+    parser = argparse.ArgumentParser()
+    flags.add_config_flags(parser, configs=(TD3BCConfig, SACNConfig, SameConfig))
+    assert parser.parse_args(["--alpha", "0.5"]).alpha == [0.5]  # a sweepable field: a list of values

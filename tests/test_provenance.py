@@ -31,6 +31,53 @@ def test_config_json_holds_the_resolved_config_and_round_trips(tiny_dataset):
     assert len(again["runs"]) == 2 and again["runs"][0] == record
 
 
+def test_resolve_applies_its_layers_in_order_and_says_where_each_value_came_from():
+    from offrl_jax.algos import SACNConfig, TD3BCConfig, resolve
+
+    plain = resolve("rebrac")  # no env: the dataclass, and the per-env table's entries for every env ("*")
+    assert set(plain.sources.values()) == {"default"}
+    anywhere = resolve("td3bc")
+    assert (anywhere.config.alpha, anywhere.sources["alpha"]) == (0.1, "per-env")
+    assert TD3BCConfig().alpha == 2.5
+    hopper = resolve("td3bc", "hopper")
+    assert (hopper.config.alpha, hopper.sources["alpha"]) == (10.0, "per-env")
+    assert (hopper.config.gamma, hopper.sources["gamma"]) == (0.99, "default")
+    preset = resolve("td3bc", "hopper", preset="published")
+    assert (preset.config.alpha, preset.sources["alpha"]) == (2.5, "preset")  # over the per-env 10
+    study = resolve("td3bc", "hopper", preset="published", overrides={"alpha": 4.0, "lam": 0.5, "tau": None},
+                    flags=("lam",))
+    assert (study.config.alpha, study.sources["alpha"]) == (4.0, "study")  # over the preset
+    assert (study.config.lam, study.sources["lam"]) == (0.5, "flag")
+    assert study.sources["tau"] == "default"  # a None override is no value
+    algo = resolve("td3bc_cql", "pen")  # the algorithm's own value, then pen's per-env one over it
+    assert (algo.config.cql_weight, algo.sources["cql_weight"]) == (1.0, "per-env")
+    assert resolve("td3bc_cql", "hopper").sources["cql_weight"] == "algo"
+    edac = resolve("sacn", "pen", "pen-cloned")  # SAC-N reads EDAC's ensemble sizes, not its eta
+    assert (edac.config.num_critics, edac.sources["num_critics"]) == (20, "per-env")
+    assert (edac.config.eta, edac.sources["eta"]) == (0.0, "algo")
+    assert resolve("edac", "hopper").config == SACNConfig(num_critics=50, eta=1.0)
+    unrecorded = resolve("td3bc", "hopper", overrides={"alpha": 3.0}, flags=None)  # a run saved before
+    assert unrecorded.sources["alpha"] == "variant"
+
+
+def test_config_json_records_where_each_value_came_from_and_an_older_one_still_reads(tiny_dataset):
+    study = Study(name="t", dataset="hopper-medium", env="hopper", seeds=(0,), updates=20_000, eval_every=1_000,
+                  variants=(Variant("a", "td3bc", (("alpha", 4.0), ("pretrain", "none")), "authors", ("alpha",)),))
+    raw = json.loads(study.record_json(tiny_dataset))
+    sources = raw["sources"]["a"]
+    assert set(sources) == set(raw["resolved"]["a"])  # every field
+    assert (sources["alpha"], sources["pretrain"], sources["init"], sources["lam"]) == \
+        ("flag", "study", "preset", "default")
+    assert raw["resolved"]["a"]["init"] == "torch"
+    assert Study.from_json(json.dumps(raw)) == study
+    # a config.json written before variants recorded their preset and flags, and before `sources`
+    old = dict(raw, variants=[{"label": "a", "algo": "td3bc", "overrides": [["alpha", 4.0], ["pretrain", "none"]]}])
+    del old["sources"]
+    before = Study.from_json(json.dumps(old))
+    assert before.variants[0].flags is None and before.config("a").alpha == 4.0
+    assert before.sources()["a"]["alpha"] == "variant" and before.sources()["a"]["lam"] == "default"
+
+
 def test_fingerprint_tells_datasets_apart(tiny_dataset):
     same = fingerprint(tiny_dataset)
     assert fingerprint(tiny_dataset.select(slice(0, len(tiny_dataset)))) == same

@@ -89,11 +89,16 @@ def test_only_the_main_job_has_the_paper_preset(capsys):
 
 
 def test_the_main_job_declares_its_default_preset():
+    def alphas(argv):  # (alpha, where it came from) of every variant
+        study = build(mujoco_medium, argv)[0]
+        return {(study.config(v.label).alpha, study.sources()[v.label]["alpha"]) for v in study.variants}
+
     (default,) = build(mujoco_medium, [])
-    assert all(dict(v.overrides)["alpha"] == 2.5 for v in default.variants)  # the "published" preset
-    assert "alpha" not in dict(build(mujoco_medium, ["--preset", "authors"])[0].variants[0].overrides)  # per env
-    assert all(dict(v.overrides)["alpha"] == 7.0 for v in build(mujoco_medium, ["--alpha", "7"])[0].variants)
-    assert "alpha" not in dict(build(mujoco_medium, ["--algo", "edac"])[0].variants[0].overrides)  # TD3+BC's only
+    assert all(v.preset == "published" for v in default.variants) and alphas([]) == {(2.5, "preset")}
+    assert alphas(["--preset", "authors"]) == {(10.0, "per-env")}  # the paper's hopper value
+    assert alphas(["--alpha", "7"]) == {(7.0, "flag")}
+    assert alphas(["--env", "walker2d", "--preset", "authors"]) == {(5.0, "per-env")}
+    assert "alpha" not in build(mujoco_medium, ["--algo", "edac"])[0].sources()["scratch"]  # TD3+BC's only
     args = mujoco_medium.make_parser().parse_args([])
     assert args.preset is None and mujoco_medium.given(args) == {}  # not a parsed flag: --config replays nothing
     with pytest.raises(UsageError, match="one config preset at a time"):

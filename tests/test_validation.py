@@ -172,3 +172,41 @@ def test_load_policy_rejects_arguments(tmp_path, kw, message):
     with pytest.raises(ValueError) as err:
         load_policy(tmp_path, **kw)  # refused before the run directory is read
     assert message in str(err.value) and "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize("algo", ["bc", "td3bc", "td3bc_cql", "edac", "sacn", "edac_bc", "cql", "rebrac", "iql"])
+@pytest.mark.parametrize("pretrain", ["none", "actor", "critic", "actor+critic"])
+def test_a_configs_schedule_is_its_algorithms_phases(algo, pretrain):
+    """What a budget check and a dry run read (`Config.schedule`, no networks) is what training runs."""
+    from offrl_jax.algos import make_algorithm, make_config
+
+    config = make_config(algo, "hopper", **({} if algo == "bc" else {"pretrain": pretrain, "pretrain_updates": 999}))
+    phases = make_algorithm(config, obs_dim=3, act_dim=2, num_transitions=10).phases(5_001)
+    assert [(s.name, s.steps, s.updates_per_call, s.auto_stop) for s in config.schedule(5_001)] == \
+        [(p.name, p.steps, p.updates_per_call, p.auto_stop) for p in phases]
+
+
+def test_a_studys_budget_check_builds_no_algorithm(monkeypatch):
+    """Study checks every variant's phases against its evaluation grid from the configs alone."""
+    from offrl_jax.algos import FAMILIES
+
+    for family in FAMILIES.values():
+        monkeypatch.setattr(family.algorithm, "__init__", lambda *a, **k: pytest.fail("an algorithm was built"))
+    study = Study(name="t", dataset="hopper-medium", env="hopper", seeds=(0,), updates=30_000, eval_every=1_000,
+                  variants=(Variant.of("a", "td3bc"), Variant.of("b", "edac"), Variant.of("c", "rebrac")))
+    assert study.config("b").num_critics == 50
+    with pytest.raises(ValueError, match="phase 'offline_rl' updates the actor once every 2 critic updates"):
+        Study(name="t", dataset="hopper-medium", env="hopper", seeds=(0,), updates=10_000, eval_every=1_001,
+              variants=(Variant.of("a", "td3bc", pretrain="none"),))
+
+
+def test_each_family_builds_its_layers_from_its_own_fields():
+    """The shared Config.arch reads only the shared fields; SACN and ReBRAC add their constant hidden bias."""
+    from offrl_jax.algos.config import Config
+
+    assert make_config("td3bc", "hopper").arch() == Config.arch(make_config("td3bc", "hopper"))
+    assert make_config("td3bc", "hopper").arch().hidden_bias is None
+    assert make_config("edac", "hopper").arch().hidden_bias is None
+    assert make_config("edac", "hopper", preset="authors").arch().hidden_bias == 0.1
+    assert make_config("rebrac", "hopper").arch().hidden_bias == 0.1
+    assert dataclasses.replace(make_config("rebrac", "hopper"), hidden_bias=None).arch().hidden_bias is None

@@ -21,7 +21,7 @@ A new family is its file, one `FAMILIES` line and an `ALGOS` line per algorithm 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from typing import Any
 
 from offrl_jax.algos.common import Phase
@@ -92,9 +92,10 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
 # The paper's / authors' per-env hyper-parameters (Section 5, Appendix G Table 3), keyed by (section, env): a section
 # is a family or an algorithm.  A section's entry for "*" applies to every env, then the env's own; a key
 # (section, "env:dataset-part") applies when the dataset name contains that part (pen-cloned's EDAC eta).  Adroit's
-# TD3+BC alpha is the paper's Table 3 value (0.1; the authors' door config has 1.0, see docs/fidelity.md).
+# TD3+BC alpha is the paper's Table 3 value (0.1; the authors' door config has 1.0, see docs/fidelity.md).  A
+# family's own pre-training length (10k updates, EDAC's 20k) is its config's default; Adroit's is the paper's 200k.
 ENV_DEFAULTS: dict[tuple[str, str], dict[str, Any]] = {
-    ("td3bc", "*"): {"alpha": 0.1, "pretrain_updates": 10_000},
+    ("td3bc", "*"): {"alpha": 0.1},
     ("td3bc", "hopper"): {"alpha": 10.0},
     ("td3bc", "halfcheetah"): {"alpha": 20.0, "lam": 0.1},
     ("td3bc", "walker2d"): {"alpha": 5.0},
@@ -103,7 +104,6 @@ ENV_DEFAULTS: dict[tuple[str, str], dict[str, Any]] = {
     ("td3bc", "relocate"): {"pretrain_updates": 200_000},
     ("td3bc", "pen"): {"alpha": 1.0, "pretrain_updates": 200_000},
     ("td3bc_cql", "pen"): {"cql_weight": 1.0},
-    ("sacn", "*"): {"pretrain_updates": 20_000},
     ("sacn", "halfcheetah"): {"lam": 0.1},
     ("sacn", "walker2d"): {"lam": 0.1},
     ("sacn", "door"): {"pretrain_updates": 200_000},
@@ -159,21 +159,55 @@ def env_defaults(algo: str, env: str, dataset: str = "") -> dict[str, Any]:
     return d
 
 
-def make_config(algo: str, env: str = "", dataset: str = "", preset: str | None = None, **overrides: Any) -> Config:
-    """Config for `algo`: the registry's values, then per-env defaults, then `preset`'s values, then `overrides`
-    (None values ignored).  `env` is a short name ("hopper"), or "" for no env (no per-env defaults)."""
+# Where a resolved value came from, in the order `resolve` applies them (a later one wins):
+#   default   the family's config dataclass
+#   algo      the values that make the algorithm (`ALGOS`, e.g. td3bc_cql's cql_weight)
+#   per-env   `ENV_DEFAULTS` for the env (and dataset)
+#   preset    the preset's values (`PRESETS`: --preset, or the study's default preset)
+#   study     a value the study sets for a variant (its pre-training mode, a swept lambda, ...)
+#   flag      a value given on the command line
+#   variant   a variant's value in a run saved before study and flag values were told apart
+SOURCES = ("default", "algo", "per-env", "preset", "study", "flag", "variant")
+
+
+@dataclasses.dataclass(frozen=True)
+class Resolved:
+    config: Config
+    sources: dict[str, str]  # every field of `config`: where its value came from (one of SOURCES)
+
+
+def resolve(algo: str, env: str = "", dataset: str = "", preset: str | None = None,
+            overrides: Mapping[str, Any] | None = None, flags: Iterable[str] | None = ()) -> Resolved:
+    """The config of `algo` and where each of its values came from, in one order (a later layer wins): the family's
+    dataclass defaults < the algorithm's values (`ALGOS`) < the per-env values (`ENV_DEFAULTS` for `env` and
+    `dataset`) < `preset`'s values < `overrides` (None values ignored), of which those named in `flags` were given
+    on the command line and the rest by the study (`flags` None: not recorded, each a "variant" value).  `env` is a
+    short name ("hopper"), or "" for no env (of the per-env values only those for every env, "*")."""
     config_cls = family_of(algo).config
     if not isinstance(env, str) or (env and env not in ENVS):
         raise ValueError(f"unknown env {env!r}; valid: {', '.join(ENVS)}")
     fields = {f.name for f in dataclasses.fields(config_cls)}
-    values = dict(ALGOS[algo].values) | env_defaults(algo, env, dataset) | preset_values(preset, algo)
-    for key, value in overrides.items():
-        if value is None:
-            continue
-        if key not in fields:
-            raise ValueError(f"'{key}' is not a hyper-parameter of {algo}; valid: {', '.join(sorted(fields))}")
-        values[key] = value
-    return config_cls(**values)
+    given = {k: v for k, v in (overrides or {}).items() if v is not None}
+    if unknown := sorted(set(given) - fields):
+        raise ValueError(f"'{unknown[0]}' is not a hyper-parameter of {algo}; valid: {', '.join(sorted(fields))}")
+    flagged = None if flags is None else set(flags)
+    layers = [("algo", dict(ALGOS[algo].values)), ("per-env", env_defaults(algo, env, dataset)),
+              ("preset", preset_values(preset, algo)),
+              ("study", {k: v for k, v in given.items() if flagged is not None and k not in flagged}),
+              ("flag", {k: v for k, v in given.items() if flagged is not None and k in flagged}),
+              ("variant", given if flagged is None else {})]
+    values: dict[str, Any] = {}
+    sources = {name: "default" for name in fields}
+    for source, layer in layers:
+        values |= layer
+        sources |= dict.fromkeys(layer, source)
+    return Resolved(config_cls(**values), {f.name: sources[f.name] for f in dataclasses.fields(config_cls)})
+
+
+def make_config(algo: str, env: str = "", dataset: str = "", preset: str | None = None, **overrides: Any) -> Config:
+    """Config for `algo` (`resolve`'s, without the sources): the registry's values, then per-env defaults, then
+    `preset`'s values, then `overrides` (None values ignored)."""
+    return resolve(algo, env, dataset, preset, overrides).config
 
 
 def saved_config(algo: str, values: Mapping[str, Any]) -> Config:
@@ -197,5 +231,5 @@ def make_algorithm(config: Config, obs_dim: int, act_dim: int, num_transitions: 
 __all__ = ["ALGOS", "Algo", "Config", "FAMILIES", "Family", "IQL", "IQLConfig", "PRESETS", "Phase", "ReBRAC",
            "ReBRACConfig", "SACN",
            "SACNConfig", "TD3BC",
-           "TD3BCConfig", "env_defaults", "family_of", "make_algorithm", "make_config", "preset_values",
-           "saved_config"]
+           "TD3BCConfig", "Resolved", "SOURCES", "env_defaults", "family_of", "make_algorithm", "make_config",
+           "preset_values", "resolve", "saved_config"]

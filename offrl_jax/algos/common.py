@@ -152,17 +152,40 @@ def single(update: UpdateFn) -> UpdateFn:
     return lambda state, batch, key: update(state, first(batch), key)
 
 
-def joint_pretraining(cfg: Any, bc_update: UpdateFn, mc_update: UpdateFn, total: int) -> tuple[list[Phase], int]:
-    """(the pre-training phase, the updates left for offline RL) of a family that pre-trains its actor by BC and its
-    critic on MC returns in one phase: `cfg.pretrain` "actor", "critic" or "actor+critic" (both on each minibatch),
-    `cfg.pretrain_updates` long (it ends itself with `cfg.pretrain_auto`, watching the losses it trains); no phase for
-    "none"."""
+@dataclasses.dataclass(frozen=True)
+class Stage:
+    """A phase as a config plans it (`Config.schedule`), before any network exists: what a budget check and a dry
+    run read; the algorithm gives each its update function (`stage_phases`)."""
+    name: str  # as `Phase.name`
+    steps: int
+    updates_per_call: int = 1
+    auto_stop: AutoStop | None = None
+
+
+PRETRAIN_MONITOR = {"actor": ("bc_loss",), "critic": ("mc_error",), "actor+critic": ("bc_loss", "mc_error")}
+
+
+def joint_schedule(cfg: Any, total: int, policy_delay: int = 1) -> list[Stage]:
+    """The stages of a family that pre-trains its actor by BC and its critic on MC returns in one phase: "pretrain"
+    (`cfg.pretrain` "actor", "critic" or "actor+critic", `cfg.pretrain_updates` long, ending itself with
+    `cfg.pretrain_auto`; none for "none"), then "offline_rl" (a multiple of `policy_delay` long, that many updates
+    per call)."""
     pre, rl = split_budget(total, 0 if cfg.pretrain == "none" else cfg.pretrain_updates)
-    if not pre:
-        return [], rl
-    update = {"actor": bc_update, "critic": mc_update, "actor+critic": chain(bc_update, mc_update)}[cfg.pretrain]
-    monitor = {"actor": ("bc_loss",), "critic": ("mc_error",), "actor+critic": ("bc_loss", "mc_error")}[cfg.pretrain]
-    return [Phase("pretrain", single(update), pre, auto_stop=cfg.auto_stop(monitor))], rl
+    stages = [Stage("pretrain", pre, auto_stop=cfg.auto_stop(PRETRAIN_MONITOR[cfg.pretrain]))] if pre else []
+    return stages + [Stage("offline_rl", rl - rl % policy_delay, policy_delay)]
+
+
+def pretrain_update(mode: str, bc_update: UpdateFn, mc_update: UpdateFn) -> UpdateFn:
+    """The single-minibatch update of a joint "pretrain" stage for pre-training mode `mode`."""
+    return single({"actor": bc_update, "critic": mc_update, "actor+critic": chain(bc_update, mc_update)}.get(
+        mode, bc_update))
+
+
+def stage_phases(stages: list[Stage], updates: dict[str, UpdateFn],
+                 on_start: dict[str, Callable] | None = None) -> list[Phase]:
+    """The phases of `stages`, each with the update function (and start hook) its name is given."""
+    return [Phase(s.name, updates[s.name], s.steps, s.updates_per_call, (on_start or {}).get(s.name), s.auto_stop)
+            for s in stages]
 
 
 def split_budget(total: int, pretrain: int) -> tuple[int, int]:

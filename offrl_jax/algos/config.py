@@ -16,7 +16,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from offrl_jax.algos.common import AutoStop
+from offrl_jax.algos.common import AutoStop, Stage, joint_schedule
 from offrl_jax.losses import BALANCES
 from offrl_jax.nets import INITS, Arch
 
@@ -87,10 +87,20 @@ class Config:
         """The stopping rule of a pre-training phase that watches `monitor`, or None when it is fixed-length."""
         return AutoStop(monitor, self.pretrain_auto_window, self.pretrain_auto_tol) if self.pretrain_auto else None
 
+    def schedule(self, total_updates: int) -> list[Stage]:
+        """The phases of a run of `total_updates` updates, as plans (no networks needed): pre-training, when there is
+        any, then offline RL; a family that plans otherwise overrides this, and its algorithm's `phases` follows it."""
+        return joint_schedule(self, total_updates)
+
     def arch(self) -> Arch:
-        """The layer-building choices (LayerNorm form, initialisation, a constant hidden bias if the family has one)."""
-        return Arch(layer_norm_affine=self.layer_norm_affine, layer_norm_eps=self.layer_norm_eps, init=self.init,
-                    hidden_bias=getattr(self, "hidden_bias", None))
+        """The layer-building choices (LayerNorm form, initialisation); a family with a constant hidden bias adds it
+        (`arch_with_bias`)."""
+        return Arch(layer_norm_affine=self.layer_norm_affine, layer_norm_eps=self.layer_norm_eps, init=self.init)
+
+
+def arch_with_bias(cfg: Config) -> Arch:
+    """`cfg.arch()` with the family's constant hidden-layer bias (`hidden_bias`, a field of SACN's and ReBRAC's)."""
+    return dataclasses.replace(Config.arch(cfg), hidden_bias=cfg.hidden_bias)
 
 
 def require(cfg: Any, checks: list[tuple[str, bool, str]]) -> None:

@@ -30,10 +30,11 @@ from offrl_jax.algos.common import (
     Phase,
     done_flags,
     gradient_step,
-    joint_pretraining,
     new_model,
     polyak,
+    pretrain_update,
     single,
+    stage_phases,
 )
 from offrl_jax.algos.config import Config, require
 from offrl_jax.nets import CriticEnsemble, DeterministicActor, GaussianActor, Value, gaussian_log_prob
@@ -44,7 +45,7 @@ class IQLConfig(Config):
     actor_layer_norm: bool = False  # IQL: no LayerNorm
     critic_layer_norm: bool = False
     init: str = "torch"
-    expectile: float = 0.7  # the V regression's expectile (IQL's tau; MuJoCo 0.7)
+    expectile: float = 0.7  # the V regression's expectile (IQL's tau)
     beta: float = 3.0  # the AWR inverse temperature (0: behaviour cloning)
     max_weight: float = 100.0  # clip of exp(beta A)
     value_lr: float = 3e-4  # Adam learning rate of V
@@ -98,8 +99,9 @@ class IQL:
         return out if self.cfg.deterministic else out[0]
 
     def phases(self, total_updates: int) -> list[Phase]:
-        phases, rl = joint_pretraining(self.cfg, self.bc_update, self.mc_update, total_updates)
-        return phases + [Phase("offline_rl", single(self.rl_update), rl)]
+        return stage_phases(self.cfg.schedule(total_updates), {
+            "offline_rl": single(self.rl_update),
+            "pretrain": pretrain_update(self.cfg.pretrain, self.bc_update, self.mc_update)})
 
     def neg_log_lik(self, params, batch: Batch) -> jax.Array:
         """(B,) the actor's per-row loss of the dataset action: squared error, or the Gaussian's -log-likelihood."""

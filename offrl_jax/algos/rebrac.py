@@ -28,16 +28,19 @@ from offrl_jax.algos.common import (
     Batch,
     Model,
     Phase,
+    Stage,
     bc_step,
     done_flags,
     first,
     gradient_step,
-    joint_pretraining,
+    joint_schedule,
     new_model,
     polyak,
+    pretrain_update,
+    stage_phases,
 )
-from offrl_jax.algos.config import Config, require
-from offrl_jax.nets import CriticEnsemble, DeterministicActor
+from offrl_jax.algos.config import Config, arch_with_bias, require
+from offrl_jax.nets import Arch, CriticEnsemble, DeterministicActor
 
 
 @dataclasses.dataclass(frozen=True)
@@ -48,9 +51,9 @@ class ReBRACConfig(Config):
     actor_layer_norm: bool = False  # ReBRAC: LayerNorm in the critic only
     init: str = "torch"
     timeouts: str = "drop"
-    # ReBRAC's behaviour penalty in the actor loss (per env: hopper 0.01, halfcheetah 0.001, walker2d 0.05)
+    # ReBRAC's behaviour penalty in the actor loss (its published per-env values: ENV_DEFAULTS)
     actor_beta: float = 1.0
-    # ReBRAC's behaviour penalty in the critic's target (per env: hopper 0.01, halfcheetah 0.01, walker2d 0.1)
+    # ReBRAC's behaviour penalty in the critic's target (its published per-env values: ENV_DEFAULTS)
     critic_beta: float = 1.0
     policy_noise: float = 0.2  # std of the target policy smoothing noise
     noise_clip: float = 0.5  # clip of the target policy smoothing noise
@@ -72,6 +75,13 @@ class ReBRACConfig(Config):
             ("pretrain_auto_window", not self.pretrain_auto or self.pretrain_auto_window % self.policy_delay == 0,
              f"must be a multiple of policy_delay ({self.policy_delay})"),
         ])
+
+    def arch(self) -> Arch:
+        return arch_with_bias(self)
+
+    def schedule(self, total_updates: int) -> list[Stage]:
+        """Pre-training, then offline RL with the actor updated once every `policy_delay` critic updates."""
+        return joint_schedule(self, total_updates, self.policy_delay)
 
 
 @struct.dataclass
@@ -102,10 +112,9 @@ class ReBRAC:
         return self.actor.apply(state.actor.params, obs)
 
     def phases(self, total_updates: int) -> list[Phase]:
-        cfg = self.cfg
-        phases, rl = joint_pretraining(cfg, self.bc_update, self.mc_update, total_updates)
-        rl -= rl % cfg.policy_delay
-        return phases + [Phase("offline_rl", self.rl_update, rl, updates_per_call=cfg.policy_delay)]
+        return stage_phases(self.cfg.schedule(total_updates), {
+            "offline_rl": self.rl_update,
+            "pretrain": pretrain_update(self.cfg.pretrain, self.bc_update, self.mc_update)})
 
     def td_target(self, state: ReBRACState, batch: Batch, key: jax.Array) -> jax.Array:
         cfg = self.cfg

@@ -24,6 +24,7 @@ from offrl_jax.algos.common import (
     Batch,
     Model,
     Phase,
+    Stage,
     chain,
     done_flags,
     gradient_step,
@@ -32,12 +33,14 @@ from offrl_jax.algos.common import (
     repeat_obs,
     single,
     split_budget,
+    stage_phases,
     uniform_actions,
 )
-from offrl_jax.algos.config import Config, check_cql_fields, require
+from offrl_jax.algos.config import Config, arch_with_bias, check_cql_fields, require
 from offrl_jax.data.returns import soft_returns_to_go
 from offrl_jax.nets import (
     TANH_LOG_DETS,
+    Arch,
     CriticEnsemble,
     TanhGaussianActor,
     sample_tanh_gaussian,
@@ -99,6 +102,19 @@ class SACNConfig(Config):
             ("cql_alpha", self.cql_alpha >= 0, "must be >= 0 (0 = off)"),
         ])
 
+    def arch(self) -> Arch:
+        return arch_with_bias(self)
+
+    def schedule(self, total_updates: int) -> list[Stage]:
+        """Pre-training in two phases, soft BC ("actor_pretrain", `actor_pretrain_fraction` of `pretrain_updates`)
+        then the critic on soft returns ("critic_pretrain"), then offline RL."""
+        pre, rl = split_budget(total_updates, 0 if self.pretrain == "none" else self.pretrain_updates)
+        actor_steps = {"actor": pre, "critic": 0, "actor+critic": int(pre * self.actor_pretrain_fraction)}.get(
+            self.pretrain, 0)
+        stages = [Stage("actor_pretrain", actor_steps, auto_stop=self.auto_stop(("soft_bc_loss",))),
+                  Stage("critic_pretrain", pre - actor_steps, auto_stop=self.auto_stop(("mc_error",)))]
+        return [s for s in stages if s.steps] + [Stage("offline_rl", rl)]
+
 
 @struct.dataclass
 class SACNState:
@@ -140,19 +156,10 @@ class SACN:
         return jnp.tanh(mean)
 
     def phases(self, total_updates: int) -> list[Phase]:
-        cfg = self.cfg
-        pre, rl = split_budget(total_updates, 0 if cfg.pretrain == "none" else cfg.pretrain_updates)
-        actor_steps = {"actor": pre, "critic": 0, "actor+critic": int(pre * cfg.actor_pretrain_fraction)}.get(
-            cfg.pretrain, 0)
-        critic_steps = pre - actor_steps
-        phases = []
-        if actor_steps:
-            phases.append(Phase("actor_pretrain", single(chain(self.temperature_update, self.soft_bc_update)),
-                                actor_steps, auto_stop=cfg.auto_stop(("soft_bc_loss",))))
-        if critic_steps:
-            phases.append(Phase("critic_pretrain", single(self.soft_mc_update), critic_steps,
-                                on_start=self.compute_soft_returns, auto_stop=cfg.auto_stop(("mc_error",))))
-        return phases + [Phase("offline_rl", single(self.rl_update), rl)]
+        return stage_phases(self.cfg.schedule(total_updates), {
+            "actor_pretrain": single(chain(self.temperature_update, self.soft_bc_update)),
+            "critic_pretrain": single(self.soft_mc_update), "offline_rl": single(self.rl_update)},
+            on_start={"critic_pretrain": self.compute_soft_returns})
 
     # ---------------------------------------------------------------------------------------- soft returns
     def compute_soft_returns(self, state: SACNState, data: Batch, key: jax.Array) -> SACNState:

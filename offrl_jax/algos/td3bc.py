@@ -23,15 +23,18 @@ from offrl_jax.algos.common import (
     Batch,
     Model,
     Phase,
+    Stage,
     bc_step,
     done_flags,
     first,
     gradient_step,
-    joint_pretraining,
+    joint_schedule,
     new_model,
     polyak,
+    pretrain_update,
     repeat_obs,
     single,
+    stage_phases,
     uniform_actions,
 )
 from offrl_jax.algos.config import Config, check_cql_fields, require
@@ -40,7 +43,7 @@ from offrl_jax.nets import CriticEnsemble, DeterministicActor
 
 @dataclasses.dataclass(frozen=True)
 class TD3BCConfig(Config):
-    alpha: float = 2.5  # TD3+BC's actor regularisation (hopper 10, halfcheetah 20, walker2d 5, Adroit 0.1 / pen 1)
+    alpha: float = 2.5  # TD3+BC's actor regularisation (TD3+BC's published value; the paper's per env: ENV_DEFAULTS)
     policy_noise: float = 0.2  # std of the target policy smoothing noise
     noise_clip: float = 0.5  # clip of the target policy smoothing noise
     policy_delay: int = 2  # critic updates per actor and target update (TD3)
@@ -81,6 +84,13 @@ class TD3BCConfig(Config):
             raise ValueError(f"TD3BCConfig.{what} has no effect on the BC baseline (bc_only: every update is a BC "
                              "update); it takes pretrain = 'actor' only")
 
+    def schedule(self, total_updates: int) -> list[Stage]:
+        """BC for the whole budget (`bc_only`), or pre-training then offline RL with the actor updated once every
+        `policy_delay` critic updates."""
+        if self.bc_only:
+            return [Stage("actor_pretrain", total_updates)]
+        return joint_schedule(self, total_updates, self.policy_delay)
+
 
 @struct.dataclass
 class TD3BCState:
@@ -110,12 +120,9 @@ class TD3BC:
         return self.actor.apply(state.actor.params, obs)
 
     def phases(self, total_updates: int) -> list[Phase]:
-        cfg = self.cfg
-        if cfg.bc_only:
-            return [Phase("actor_pretrain", single(self.bc_update), total_updates)]
-        phases, rl = joint_pretraining(cfg, self.bc_update, self.mc_update, total_updates)
-        rl -= rl % cfg.policy_delay
-        return phases + [Phase("offline_rl", self.rl_update, rl, updates_per_call=cfg.policy_delay)]
+        return stage_phases(self.cfg.schedule(total_updates), {
+            "actor_pretrain": single(self.bc_update), "offline_rl": self.rl_update,
+            "pretrain": pretrain_update(self.cfg.pretrain, self.bc_update, self.mc_update)})
 
     # --------------------------------------------------------------------------------------------- targets
     def td_target(self, state: TD3BCState, batch: Batch, key: jax.Array) -> jax.Array:

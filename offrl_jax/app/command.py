@@ -1,7 +1,8 @@
 """What `python -m experiments.<name>` does, as named steps: `run_command(build, parser, argv)`.
 
     1. read the command      flags checked; the study (or studies) built, replayed from --config, or read back for
-                             --resume; what a killed --overwrite of the directory left aside given back
+                             --resume; what a killed --overwrite of the directory left aside given back; with
+                             --dry-run, printed (`offrl_jax.app.dry_run`), and the command ends here
     2. start the processes   this process's CPU cores, a multi-process run's others (`offrl_jax.app.launch`)
     3. claim the output      the run directory chosen (`offrl_jax.app.outputs`), checked writable and locked
     4. load the data         every dataset once, before anything is written; bad data fails here
@@ -26,6 +27,7 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
+from offrl_jax.app.dry_run import describe, state_defaults
 from offrl_jax.app.launch import check_backend, start_local_processes, start_processes, use_cpu_cores
 from offrl_jax.app.outputs import (
     check_resume_dir,
@@ -40,7 +42,7 @@ from offrl_jax.data.dataset import DatasetError, rows_without_timeouts
 from offrl_jax.run.provenance import fingerprint, recorded_command, recorded_data
 from offrl_jax.run.resume import check_resume, edited_resolved
 from offrl_jax.run.runner import Diverged, run_study
-from offrl_jax.run.study import Study, Variant
+from offrl_jax.run.study import Study
 from offrl_jax.run.summary import print_table
 from offrl_jax.system.checkpoint import atomic_write_text
 from offrl_jax.system.cli import UsageError, check_writable_dir, lock_run_dir, one_line_warnings, print_error
@@ -50,11 +52,13 @@ Build = Callable[[argparse.Namespace], "Study | list[Study]"]
 
 _UNSET = object()
 PROCESS_FLAGS = frozenset({"processes", "distributed", "coordinator", "num_processes", "process_id"})
-RESUME_FLAGS = frozenset({"resume", "updates", "parallel", "no_progress", "clip_actions", "logger", *PROCESS_FLAGS})
+RESUME_FLAGS = frozenset({"resume", "updates", "parallel", "no_progress", "clip_actions", "logger", "dry_run",
+                          *PROCESS_FLAGS})
 # run flag destination -> the Study field it sets (seeds and --dataset-path are mapped in `replay`)
 RUN_FIELDS = ("updates", "eval_every", "eval_episodes", "batch_size", "checkpoint_every", "keep_checkpoints",
               "max_transitions", "clip_actions")
-REPLAY_FLAGS = frozenset({"config", "out", "overwrite", "parallel", "no_progress", "logger", "seeds", "seed_offset",
+REPLAY_FLAGS = frozenset({"config", "out", "overwrite", "parallel", "no_progress", "logger", "dry_run", "seeds",
+                          "seed_offset",
                           "dataset_path", *RUN_FIELDS, *PROCESS_FLAGS})
 
 
@@ -103,7 +107,9 @@ def replay(saved: Study | list[Study], args, given: set[str], hparams: dict) -> 
                 raise UsageError(f"--{field.replace('_', '-')}: the saved run's variants differ in {field} ("
                                  f"{', '.join(f'{v.label}: {k}' for k, v in values.items())}), so one value for all "
                                  "would leave their labels false; start a new run to compare other values")
-        variants = tuple(Variant.of(v.label, v.algo, **(dict(v.overrides) | hparams)) for v in study.variants)
+        variants = tuple(dataclasses.replace(v, overrides=tuple(sorted((dict(v.overrides) | hparams).items())),
+                                             flags=None if v.flags is None else (*v.flags, *hparams))
+                         for v in study.variants)
         return dataclasses.replace(study, variants=variants, **fields)
 
     return [one(s) for s in saved] if isinstance(saved, list) else one(saved)
@@ -202,6 +208,10 @@ class Command:
         elif not self.resuming:
             # validates every hyper-parameter and budget; `typed`: the flags typed, a default value typed included
             self.built = build(argparse.Namespace(**vars(args), typed=frozenset(given)))
+        elif getattr(args, "dry_run", False):  # what a resume would continue (the run directory is only read)
+            self.built = saved_studies(args.resume)
+            if "updates" in given:
+                self.built = extend(self.built, args.updates)
 
     # 2. start the processes
     def start_processes(self) -> None:
@@ -367,11 +377,16 @@ def run_command(build: Build, parser: argparse.ArgumentParser, argv=None,
 
     For --config: `hparam_dests` are the flags that set single hyper-parameters, and `hparams(args)` the overrides
     they make ({config field: value}, None for a flag not given)."""
+    state_defaults(parser, build)  # --help's "Default:" of each hyper-parameter: what the study gives it
     command = Command(parser.parse_args(argv), parser, argv)
     one_line_warnings()
     ok, code = False, 1
     try:
         command.read(build, hparams, hparam_dests)
+        if getattr(command.args, "dry_run", False):
+            print(describe(command.studies))
+            ok = True
+            return 0
         command.start_processes()
         command.claim_output()
         data = command.load()

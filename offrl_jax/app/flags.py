@@ -76,16 +76,22 @@ def _family_name(cls: type) -> str:
 
 
 def _fields(configs: tuple[type, ...] = CONFIGS) -> dict[str, dict[str, Any]]:
-    """Every config field once (the first config's order first): type, per-class defaults, comment, sweepability."""
+    """Every config field once (the first config's order first): type, per-class defaults, comment, sweepability.
+    All families share one flag per field name, parsed by one type: a family that declares a field of another's
+    name with another type is refused (ValueError naming both), as it would be parsed by the other's type."""
     found: dict[str, dict[str, Any]] = {}
     for cls in configs:
         hints, comments = typing.get_type_hints(cls), field_comments(cls)
         for f in dataclasses.fields(cls):
             entry = found.setdefault(f.name, {"type": hints[f.name], "defaults": {}, "comment": "",
-                                              "sweepable": False})
+                                              "sweepable": False, "declared": cls})
+            if hints[f.name] != entry["type"]:
+                raise ValueError(f"{cls.__name__}.{f.name} is {hints[f.name]} but {entry['declared'].__name__}."
+                                 f"{f.name} is {entry['type']}: one --{f.name.replace('_', '-')} flag cannot parse "
+                                 "both; give the field another name")
             entry["defaults"][_family_name(cls)] = f.default
             entry["comment"] = entry["comment"] or comments.get(f.name, "")
-            entry["sweepable"] |= f.name in cls.SWEEPABLE
+            entry["sweepable"] |= f.name in getattr(cls, "SWEEPABLE", ())
     return found
 
 
@@ -114,8 +120,9 @@ def add_config_flags(parser: argparse.ArgumentParser, omit: typing.Iterable[str]
     """One flag per field of `configs` (but `NOT_FLAGS` and `omit`), in a group of their own; returns their
     destinations, which are the field names."""
     group = parser.add_argument_group(
-        "hyper-parameters", "every field of the algorithm's config (offrl_jax/algos/); not given = the per-env "
-        "default (offrl_jax.algos.ENV_DEFAULTS) or the config's own; a field the algorithm does not have is refused")
+        "hyper-parameters", "every field of the algorithm's config (offrl_jax/algos/); not given = what the study "
+        "gives it (each Default below: a preset's, the per-env table's or the config's own; --dry-run shows every "
+        "value and where it came from); a field the algorithm does not have is refused")
     dests = []
     for name, entry in _fields(configs).items():
         if name in NOT_FLAGS or name in omit:
@@ -123,9 +130,10 @@ def add_config_flags(parser: argparse.ArgumentParser, omit: typing.Iterable[str]
         defaults = entry["defaults"]
         shown = (f"{next(iter(defaults.values()))!r}" if len(set(map(repr, defaults.values()))) == 1 else
                  ", ".join(f"{family} {value!r}" for family, value in defaults.items()))
-        text = entry["comment"] + (". " if entry["comment"] else "") + f"Default: {shown}"
+        text = entry["comment"] + (". " if entry["comment"] else "")
         if entry["sweepable"]:
-            text += "; several values = a sweep, vmapped in one program"
+            text += "Several values = a sweep, vmapped in one program. "
+        text += f"Default: {shown}"
         group.add_argument(f"--{name.replace('_', '-')}", *ALIASES.get(name, ()), dest=name, default=None,
                            help=text.replace("%", "%%"), **_argument(name, entry["type"], entry["sweepable"]))
         dests.append(name)
@@ -229,6 +237,10 @@ def run_args(parser: argparse.ArgumentParser, updates: int | None, eval_every: i
                    help="variants trained at once (default %(default)s); on the CPU each in a process pinned to its "
                         "own core(s), on a GPU in threads; 1 = one after another, each splitting its seeds over "
                         "every core")
+    g.add_argument("--dry-run", action="store_true",
+                   help="print every variant's resolved config (each value, and where it came from: default, algo, "
+                        "per-env, preset, study or flag), the budget and the phases, then exit: nothing is written, "
+                        "loaded or trained")
     g.add_argument("--no-progress", action="store_true",
                    help="no progress bar: one plain line per evaluation instead (for batch logs)")
     m = parser.add_argument_group("many processes or hosts (jax.distributed; offrl_jax/system/distributed.py)")

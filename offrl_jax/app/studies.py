@@ -12,7 +12,7 @@ import argparse
 import re
 from pathlib import Path
 
-from offrl_jax.algos import ALGOS, PRESETS, SACNConfig, preset_values
+from offrl_jax.algos import ALGOS, PRESETS
 from offrl_jax.app.flags import FLAG_FIELDS, add_config_flags, config_values, run_args, sweepable_fields
 from offrl_jax.data.readers import FILE_SUFFIXES
 from offrl_jax.run.study import Study, Variant
@@ -25,14 +25,13 @@ LABELS = {"actor+critic": "pretrained", "none": "scratch", "actor": "actor-only"
 
 
 def parser(prog: str, doc: str, updates: int = 100_000,
-           eval_every: int = 5_000, env: str = "hopper", edac_pretrain: dict | None = None, omit: tuple[str, ...] = (),
-           preset: bool = False, num_critics: str = "per env", seeds: int = 3, eval_episodes: int = 10,
-           default_preset: str | None = None) -> argparse.ArgumentParser:
-    """The flags every MuJoCo study shares; studies pass their own defaults (`edac_pretrain`: the study's EDAC
-    `pretrain_updates` / `actor_pretrain_fraction`, and `num_critics`, for the help text), leave out the flags
-    they set themselves (`omit`: destinations, e.g. ("pretrain", "lam")), and only the main job has `--preset paper`
-    (`preset`); `default_preset` names the config preset the study applies when no --preset is given."""
-    edac = {f: getattr(SACNConfig, f) for f in ("pretrain_updates", "actor_pretrain_fraction")} | (edac_pretrain or {})
+           eval_every: int = 5_000, env: str = "hopper", omit: tuple[str, ...] = (), preset: bool = False,
+           seeds: int = 3, eval_episodes: int = 10, default_preset: str | None = None) -> argparse.ArgumentParser:
+    """The flags every MuJoCo study shares; studies pass their own defaults, leave out the flags they set
+    themselves (`omit`: destinations, e.g. ("pretrain", "lam")), and only the main job has `--preset paper`
+    (`preset`); `default_preset` names the config preset the study applies when no --preset is given.  Each
+    hyper-parameter's stated default is the study's own, read from what it builds when its help is shown
+    (`offrl_jax.app.dry_run.state_defaults`)."""
     p = OneLineParser(prog=prog, description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
     group = p.add_argument_group("what to compare")
 
@@ -47,17 +46,16 @@ def parser(prog: str, doc: str, updates: int = 100_000,
     add("--pretrain", nargs="+", choices=PRETRAIN, default=["actor+critic", "none"],
         help="pre-training modes to compare, one variant each (default: actor+critic none)")
     add("--pretrain-updates", type=pretrain_budget, default=None,
-        help=f"N, or auto[:CAP] to end each pre-training phase when its supervised losses improve by less than 1 %% "
-             f"per 1k updates (every seed; capped at CAP or the default; the rest goes to offline RL; --eval-every "
-             f"must then be a multiple of 1000, e.g. 5000).  "
-             f"Default: 10k TD3+BC, {edac['pretrain_updates'] // 1000}k EDAC")
+        help="N, or auto[:CAP] to end each pre-training phase when its supervised losses improve by less than 1 %% "
+             "per 1k updates (every seed; capped at CAP or the default; the rest goes to offline RL; --eval-every "
+             "must then be a multiple of 1000, e.g. 5000).  Default: per algorithm and env")
     help_authors = ("authors: the authors' code switch by switch (LayerNorm without scale/bias and eps 1e-5, "
                     "PyTorch init, a 3x256 TD3+BC actor, no bootstrap at time-outs, x/sg(x) loss balancing, the "
                     "paper's per-env alphas; docs/fidelity.md); flags given with it override single values")
     help_default = (f"published: TD3+BC's published alpha ({PRESETS['published']['td3bc']['alpha']}) instead of the "
                     "paper's per-env values.  " if "published" in PRESETS else "")
-    if default_preset is not None:
-        help_default += f"Default: {default_preset}"
+    help_default += (f"Default: {default_preset}" if default_preset else
+                     "Default: none (each value is the per-env table's or the config's)")
     if preset:
         add("--preset", nargs="+", choices=("paper", *PRESETS), default=None,
             help="paper: 3 envs x {td3bc, edac} medium x --seeds seeds x 1M updates (evaluation every 10k), "
@@ -68,12 +66,6 @@ def parser(prog: str, doc: str, updates: int = 100_000,
         add("--preset", nargs=1, choices=tuple(PRESETS), default=None, help=help_authors + ".  " + help_default)
     p.set_defaults(default_preset=default_preset)
     add_config_flags(p, omit)
-    for action in p._actions:  # this study's defaults where they differ from the configs'
-        if action.dest == "num_critics":
-            action.help = f"EDAC/SAC-N ensemble size. Default: {num_critics}"
-        if action.dest == "actor_pretrain_fraction":
-            action.help = (f"EDAC: share of --pretrain-updates spent on soft BC, the rest on the critic. Default: "
-                           f"{edac['actor_pretrain_fraction']}")
     run_args(p, updates=updates, eval_every=eval_every, seeds=seeds, eval_episodes=eval_episodes)
     return p
 
@@ -111,27 +103,29 @@ def chosen(args) -> dict:
     return ({"preset": default} if default and not getattr(args, "preset", None) else {}) | given(args)
 
 
-def sweep_variants(label: str, algo: str, fixed: dict) -> tuple[Variant, ...]:
+def sweep_variants(label: str, algo: str, fixed: dict, flags: frozenset[str] = frozenset()) -> tuple[Variant, ...]:
     """One variant, or one per value of a swept flag (labels "pretrained alpha=2.5", ...); the runner trains a
-    sweep's variants as one program.  A "preset" entry of `fixed` is expanded into its values for `algo`
-    (every value is then recorded in the variant), under the other entries."""
+    sweep's variants as one program.  A "preset" entry of `fixed` is the variants' config preset, applied under the
+    other entries; the entries named in `flags` were given on the command line (the rest are the study's own)."""
     fixed = dict(fixed)
-    fixed = preset_values(fixed.pop("preset", None), algo) | fixed
-    return _sweep_variants(label, algo, fixed)
-
-
-def _sweep_variants(label: str, algo: str, fixed: dict) -> tuple[Variant, ...]:
+    preset = fixed.pop("preset", None)
     swept = [k for k in SWEPT if isinstance(fixed.get(k), list)]
     if not swept:
-        return (Variant.of(label, algo, **fixed),)
+        return (Variant(label, algo, tuple(sorted(fixed.items())), preset, tuple(flags)),)
     if len(swept) > 1:
         raise ValueError(f"sweep one hyper-parameter at a time, got several values for {' and '.join(swept)}")
     name = swept[0]
-    return tuple(Variant.of(f"{label} {name}={value:g}", algo, **(fixed | {name: value})) for value in fixed[name])
+    return tuple(Variant(f"{label} {name}={value:g}", algo, tuple(sorted((fixed | {name: value}).items())), preset,
+                         tuple(flags)) for value in fixed[name])
+
+
+def study_variants(label: str, algo: str, own: dict, args) -> tuple[Variant, ...]:
+    """`sweep_variants` of the study's own values `own` under the flags given (`chosen(args)`, which win)."""
+    return sweep_variants(label, algo, own | chosen(args), frozenset(overrides(args)))
 
 
 def pretrain_variants(algo: str, modes, args) -> tuple[Variant, ...]:
-    return tuple(v for mode in modes for v in sweep_variants(LABELS[mode], algo, {"pretrain": mode} | chosen(args)))
+    return tuple(v for mode in modes for v in study_variants(LABELS[mode], algo, {"pretrain": mode}, args))
 
 
 def make_study(env: str, algo: str, level: str, args, extra: dict | None = None,

@@ -4,7 +4,8 @@ divergence.
 
 Output directory:
     config.json      the study (enough to resume or replay it), every variant's resolved config ("resolved": every
-                     field after per-env defaults and presets), and one record per start or resume ("runs": command,
+                     field after per-env defaults and presets; "sources": where each value came from), and one record
+                     per start or resume ("runs": command,
                      git commit, versions, backend, dataset fingerprint; `offrl_jax.run.provenance`)
     curves.csv       variant, seed, phase, update, seconds, score, every logged metric; `seconds` is the variant's
                      training wall-clock so far: its jitted chunks including their XLA compilation, excluding the

@@ -10,7 +10,7 @@ import dataclasses
 import json
 from typing import Any
 
-from offrl_jax.algos import Config, family_of, make_algorithm, make_config
+from offrl_jax.algos import Config, Resolved, family_of, resolve
 from offrl_jax.data.dataset import Dataset
 from offrl_jax.driver import check_call_grid
 from offrl_jax.envs.registry import get_env_spec
@@ -32,6 +32,9 @@ class Variant:
     label: str  # unique, used in files: "pretrained", "scratch", "lambda=0.1", ...
     algo: str
     overrides: tuple[tuple[str, Any], ...] = ()  # config overrides as (name, value) pairs
+    preset: str | None = None  # the config preset (`offrl_jax.algos.PRESETS`) applied under the overrides
+    # the overrides given on the command line (the rest are the study's own); None: not recorded (a run saved before)
+    flags: tuple[str, ...] | None = ()
 
     def __post_init__(self):
         check_file_name("Variant.label", self.label)
@@ -42,10 +45,20 @@ class Variant:
         if pairs is None or not all(isinstance(name, str) for name, _ in pairs):
             raise ValueError(f"Variant.overrides = {self.overrides!r} must be (name, value) pairs")
         object.__setattr__(self, "overrides", pairs)
+        if self.preset is not None and not isinstance(self.preset, str):
+            raise ValueError(f"Variant.preset = {self.preset!r} must be a preset's name or None")
+        if self.flags is not None:
+            if isinstance(self.flags, str) or not all(isinstance(name, str) for name in self.flags):
+                raise ValueError(f"Variant.flags = {self.flags!r} must be names of its overrides")
+            object.__setattr__(self, "flags", tuple(sorted(set(self.flags) & {name for name, _ in pairs})))
 
     @staticmethod
     def of(label: str, algo: str, **overrides: Any) -> Variant:
         return Variant(label, algo, tuple(sorted(overrides.items())))
+
+    def resolve(self, env: str, dataset: str = "") -> Resolved:
+        """This variant's config on `env` (and `dataset`) and where each value came from (`offrl_jax.algos.resolve`)."""
+        return resolve(self.algo, env, dataset, self.preset, dict(self.overrides), self.flags)
 
 
 MAX_MEMBERS = 1024  # seeds (x sweep values) trained as one program: ~3 MB each for TD3+BC, ~30 for EDAC on 1M rows
@@ -118,11 +131,12 @@ class Study:
         get_env_spec(self.env)
         # every variant's config, resolved once (registry, per-env defaults, preset, overrides) and checked with its
         # budget before anything is written; everyone reads it from here (`config`)
-        configs = {v.label: make_config(v.algo, self.env, self.dataset, **dict(v.overrides)) for v in self.variants}
+        resolved = {v.label: v.resolve(self.env, self.dataset) for v in self.variants}
+        configs = {label: r.config for label, r in resolved.items()}
         for config in configs.values():
-            phases = make_algorithm(config, obs_dim=1, act_dim=1, num_transitions=1).phases(self.updates)
-            check_call_grid(phases, self.eval_every)
-        object.__setattr__(self, "_configs", configs)  # not a field: not in to_json, equality or replace
+            check_call_grid(config.schedule(self.updates), self.eval_every)
+        object.__setattr__(self, "_configs", configs)  # not fields: not in to_json, equality or replace
+        object.__setattr__(self, "_sources", {label: r.sources for label, r in resolved.items()})
         widest = max(len(group) for group, _ in self.groups()) * len(self.seeds)
         if widest > MAX_MEMBERS:
             n = len(self.seeds)
@@ -147,11 +161,15 @@ class Study:
         """{label: every field of the variant's algorithm config, after per-env defaults, preset and overrides}."""
         return {label: dataclasses.asdict(config) for label, config in self._configs.items()}
 
+    def sources(self) -> dict[str, dict[str, str]]:
+        """{label: {field: where its resolved value came from}} (`offrl_jax.algos.SOURCES`)."""
+        return {label: dict(sources) for label, sources in self._sources.items()}
+
     def record_json(self, ds: Dataset | None = None, previous: str | None = None,
                     data_sha256: str | None = None) -> str:
         """config.json: the study, its resolved configs, and the run records so far plus this one."""
         runs = run_records(json.loads(previous)) if previous else []
-        raw = dataclasses.asdict(self) | {"resolved": self.resolved(),
+        raw = dataclasses.asdict(self) | {"resolved": self.resolved(), "sources": self.sources(),
                                           "runs": runs + [run_record(ds, self.dataset, data_sha256)]}
         return json.dumps(raw, indent=2, default=list) + "\n"
 
@@ -169,12 +187,14 @@ class Study:
         run_records(raw)  # what the run wrote about itself (checked here); the study is the rest
         resolved = raw.pop("resolved", {})
         raw.pop("runs", None)
+        raw.pop("sources", None)  # a record, as `resolved` is: the variants give it again
         if not isinstance(resolved, dict) or not all(isinstance(c, dict) for c in resolved.values()):
             raise ValueError("'resolved' must map each variant to its config (an object)")
         if "transitions" in raw:  # runs saved before the cap was renamed
             raw["max_transitions"] = raw.pop("transitions")
         value = lambda x: tuple(x) if isinstance(x, list) else x  # noqa: E731  JSON has lists; configs use tuples
-        raw["variants"] = tuple(Variant(v["label"], v["algo"], tuple((k, value(x)) for k, x in v["overrides"]))
+        raw["variants"] = tuple(Variant(v["label"], v["algo"], tuple((k, value(x)) for k, x in v["overrides"]),
+                                        v.get("preset"), None if v.get("flags") is None else tuple(v["flags"]))
                                 for v in raw["variants"])
         raw["seeds"] = tuple(raw["seeds"])
         raw["final_window"] = tuple(raw["final_window"]) if raw.get("final_window") else None
@@ -220,7 +240,7 @@ def sweep_groups(variants: tuple[Variant, ...]) -> list[tuple[tuple[Variant, ...
 
 
 def _swept_name(a: Variant, b: Variant) -> str | None:
-    if a.algo != b.algo:
+    if a.algo != b.algo or a.preset != b.preset:
         return None
     da, db = dict(a.overrides), dict(b.overrides)
     diff = [k for k in sorted(da.keys() | db.keys()) if da.get(k) != db.get(k)]
