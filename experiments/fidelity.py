@@ -19,18 +19,23 @@ import time
 from pathlib import Path
 
 from offrl_jax.app.command import run_command
+from offrl_jax.app.flags import FLAG_FIELDS
 from offrl_jax.app.studies import make_study, parser
 from offrl_jax.data.generate.reference import CORL_UPDATES, D4RL_V2, target_band
 from offrl_jax.run.study import Variant
 from offrl_jax.system.checkpoint import atomic_write_text
-from offrl_jax.system.cli import int_at_least, positive_int
+from offrl_jax.system.cli import UsageError, int_at_least, positive_int
 
+UPDATES, EVAL_EVERY = 20_000, 5_000  # the run flags' defaults, never used: build() sets each study's own budget
 BC = Variant.of("BC", "bc", pretrain="actor", actor_layer_norm=False)
 TD3BC = Variant.of("TD3+BC from scratch", "td3bc", pretrain="none", alpha=2.5, actor_layer_norm=False,
                    critic_layer_norm=False)
 
 
 def build(args):
+    if args.updates != UPDATES or args.eval_every != EVAL_EVERY:
+        raise UsageError("the fidelity command sets each study's budget itself: give --bc-updates / --td3bc-updates "
+                         "instead of --updates / --eval-every")
     studies = [make_study(args.env, "bc", args.level, args, variants=(BC,), extra={"updates": args.bc_updates,
                "eval_every": args.bc_updates // 4}, name="bc")]
     if args.td3bc_updates:
@@ -41,8 +46,9 @@ def build(args):
 
 
 def make_parser():
-    p = parser("experiments.fidelity", __doc__, updates=20_000, eval_every=5_000, seeds=5, eval_episodes=10,
-               omit=("algo", "pretrain", "pretrain_updates", "updates", "eval_every"))
+    # the measure is CORL's settings: no hyper-parameter flags (a flag the variants' fixed values would override)
+    p = parser("experiments.fidelity", __doc__, updates=UPDATES, eval_every=EVAL_EVERY, seeds=5, eval_episodes=10,
+               omit=("algo", "pretrain", "pretrain_updates", "updates", "eval_every", "preset", *FLAG_FIELDS))
     p.add_argument("--bc-updates", type=positive_int, default=20_000, help="BC's updates (default %(default)s)")
     p.add_argument("--td3bc-updates", type=int_at_least(0), default=50_000,
                    help="TD3+BC's updates; 0 leaves TD3+BC out (default %(default)s)")

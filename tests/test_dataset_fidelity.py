@@ -50,3 +50,14 @@ def test_a_tiny_fidelity_run_writes_its_table(tmp_path):
     assert "| BC, 40 updates |" in result.stdout
     config = json.loads((out / "td3bc" / "config.json").read_text())
     assert "alpha" in json.dumps(config)
+
+
+def test_fidelity_takes_no_flag_it_would_ignore(tmp_path):
+    """Its settings are CORL's: no hyper-parameter flags, and its budgets are its own flags."""
+    assert run_module("experiments.fidelity", "--alpha", "3").returncode == 2
+    refused = run_module("experiments.fidelity", "--updates", "5000", "--out", tmp_path / "x")
+    assert refused.returncode == 2 and "--bc-updates" in refused.stderr and not (tmp_path / "x").exists()
+    dry = run_module("experiments.fidelity", "--dry-run", "--td3bc-updates", "30000", cwd=tmp_path)
+    assert dry.returncode == 0, dry.stderr
+    assert "study bc" in dry.stdout and "study td3bc" in dry.stdout and "30,000 updates" in dry.stdout
+    assert "alpha = 2.5  (study)" in dry.stdout and list(tmp_path.iterdir()) == []
