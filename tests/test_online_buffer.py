@@ -1,4 +1,5 @@
 """The online buffer and the Monte-Carlo returns of online episodes, against values worked out by hand."""
+import jax
 import numpy as np
 import pytest
 
@@ -70,6 +71,9 @@ def test_insert_wraps_around_and_writes_returns_when_episodes_end():
     A(rows["rewards"], [3, 4, 5, 6])
     A(rows["returns"], [3.0, 9.0, 10.0, 0.0])
     A(after_two.arrays["rewards"][0], [1, 2, 3, 4])  # insert is pure: the buffer passed in is unchanged
+    donated = insert(after_two, block([[5, 6], [50, 60]], terminals=[[0, 0], [1, 1]], timeouts=[[1, 0], [0, 0]]),
+                     donate=True)  # in place: the same buffer
+    assert all((np.asarray(x) == np.asarray(y)).all() for x, y in zip(jax.tree.leaves(donated), jax.tree.leaves(buf)))
 
 
 def test_partly_filled_member_rows():
@@ -122,3 +126,16 @@ def test_device_rows_normalise_like_the_offline_data():
     A(rows["rewards"][0], [1.0, 2.0])
     A(rows["actions"], raw["actions"])
     assert all(v.dtype == np.float32 for v in rows.values())
+
+
+def test_a_buffer_round_trips_through_a_checkpoint(tmp_path):
+    from offrl_jax.system.checkpoint import load_checkpoint, save_checkpoint
+
+    buf = insert(new_buffer(2, capacity=5, obs_dim=1, act_dim=1, gamma=0.5, horizon=3),
+                 block([[1, 2, 3], [4, 5, 6]], terminals=[[0, 1, 0], [0, 0, 1]]))
+    save_checkpoint(tmp_path / "ckpt.msgpack", buf, update=7, seconds=1.0, history=[])
+    template = new_buffer(2, capacity=5, obs_dim=1, act_dim=1, gamma=0.5, horizon=3)
+    restored, update, _, _ = load_checkpoint(tmp_path / "ckpt.msgpack", template)
+    assert update == 7 and restored.gamma == 0.5 and restored.horizon == 3
+    for x, y in zip(jax.tree.leaves(restored), jax.tree.leaves(buf)):
+        A(x, y)

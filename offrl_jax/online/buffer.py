@@ -58,8 +58,8 @@ def new_buffer(members: int, capacity: int, obs_dim: int, act_dim: int, gamma: f
         raise ValueError(f"an online buffer needs a capacity and a horizon of at least 1, not {capacity}, {horizon}")
     dims = {"observations": (obs_dim,), "next_observations": (obs_dim,), "actions": (act_dim,)}
     arrays = {f: jnp.zeros((members, capacity, *dims.get(f, ())), jnp.float32) for f in DATA_FIELDS}
-    zeros = jnp.zeros(members, jnp.int32)
-    return OnlineBuffer(arrays, zeros, zeros, zeros, float(gamma), int(horizon), bool(timeout_tail))
+    counts = [jnp.zeros(members, jnp.int32) for _ in range(3)]  # separate buffers: an insert may donate them
+    return OnlineBuffer(arrays, *counts, float(gamma), int(horizon), bool(timeout_tail))
 
 
 def device_rows(block: dict[str, np.ndarray], obs_mean: np.ndarray, obs_std: np.ndarray,
@@ -110,17 +110,20 @@ def _insert_member(buf: OnlineBuffer, block: dict[str, jax.Array]) -> OnlineBuff
                        pending=jnp.where(last_end >= 0, k - 1 - last_end, buf.pending + k).astype(jnp.int32))
 
 
-@jax.jit
-def _insert(buffer: OnlineBuffer, block: dict[str, jax.Array]) -> OnlineBuffer:
-    return jax.vmap(_insert_member)(buffer, block)
+_insert = jax.jit(jax.vmap(_insert_member))
+_insert_donating = jax.jit(jax.vmap(_insert_member), donate_argnums=0)
 
 
-def insert(buffer: OnlineBuffer, block: dict[str, jax.Array | np.ndarray]) -> OnlineBuffer:
+def insert(buffer: OnlineBuffer, block: dict[str, jax.Array | np.ndarray], donate: bool = False) -> OnlineBuffer:
     """`buffer` with a block of K transitions per member appended (`BLOCK_FIELDS`, (S, K, ...), in device form:
     `device_rows`), the oldest rows overwritten once the ring is full, and the returns of every episode the block
-    ends written beside its rows.  Pure: the buffer passed in is unchanged.  One program per K."""
+    ends written beside its rows.  One program per K.
+
+    Pure: the buffer passed in is unchanged, which costs a copy of it.  With `donate` its arrays are written in place
+    instead and must not be used again (200k rows, 2 members, one CPU core: 0.4 ms an insert instead of 27 ms)."""
     check_block(buffer, block)
-    return _insert(buffer, {f: jnp.asarray(block[f], jnp.float32) for f in BLOCK_FIELDS})
+    return (_insert_donating if donate else _insert)(buffer, {f: jnp.asarray(block[f], jnp.float32)
+                                                               for f in BLOCK_FIELDS})
 
 
 def member_rows(buffer: OnlineBuffer, member: int) -> dict[str, np.ndarray]:
