@@ -139,3 +139,13 @@ def test_a_buffer_round_trips_through_a_checkpoint(tmp_path):
     assert update == 7 and restored.gamma == 0.5 and restored.horizon == 3
     for x, y in zip(jax.tree.leaves(restored), jax.tree.leaves(buf)):
         A(x, y)
+
+
+def test_an_episode_longer_than_the_horizon_is_refused():
+    buf = new_buffer(2, capacity=8, obs_dim=1, act_dim=1, gamma=0.5, horizon=3)
+    buf = insert(buf, block([[1, 2], [1, 2]], terminals=[[0, 0], [0, 1]]))  # member 0: 2 steps running
+    with pytest.raises(ValueError, match="member 0: an episode ran past the buffer's horizon of 3"):
+        insert(buf, block([[3, 4], [3, 4]], terminals=[[0, 1], [0, 0]]))  # member 0's episode would be 4 steps
+    with pytest.raises(ValueError, match="member 1: an episode ran past"):
+        insert(buf, block([[3, 4, 5], [3, 4, 5]], terminals=[[1, 0, 0], [0, 0, 0]]))  # 3 steps, not ended
+    insert(buf, block([[3, 4], [3, 4]], terminals=[[1, 0], [0, 0]]))  # 3 steps each: at the horizon, accepted

@@ -91,6 +91,17 @@ def check_block(buffer: OnlineBuffer, block: dict[str, jax.Array]) -> int:
     return k
 
 
+def check_episode_lengths(pending: np.ndarray, ends: np.ndarray, horizon: int) -> None:
+    """Raises ValueError when a member's episode runs past `horizon` steps (its returns could not be written):
+    pending (S,) steps of each member's running episode, ends (S, K) the block's terminal-or-time-out flags."""
+    for member, (before, flags) in enumerate(zip(pending, np.asarray(ends) > 0)):
+        cuts = np.flatnonzero(flags)
+        runs = np.diff(np.concatenate([[-1 - before], cuts, [len(flags) - 1]]))  # the last run: still pending
+        if runs[:-1].max(initial=0) > horizon or runs[-1] > horizon - 1:
+            raise ValueError(f"member {member}: an episode ran past the buffer's horizon of {horizon} steps "
+                             "(the env's time limit must end it by then)")
+
+
 def _insert_member(buf: OnlineBuffer, block: dict[str, jax.Array]) -> OnlineBuffer:
     """One member's insert: buf leaves (C, ...) and (); block leaves (K, ...)."""
     cap, k = buf.capacity, block["rewards"].shape[0]
@@ -122,6 +133,7 @@ def insert(buffer: OnlineBuffer, block: dict[str, jax.Array | np.ndarray], donat
     Pure: the buffer passed in is unchanged, which costs a copy of it.  With `donate` its arrays are written in place
     instead and must not be used again (200k rows, 2 members, one CPU core: 0.4 ms an insert instead of 27 ms)."""
     check_block(buffer, block)
+    check_episode_lengths(np.asarray(buffer.pending), np.maximum(block["terminals"], block["timeouts"]), buffer.horizon)
     return (_insert_donating if donate else _insert)(buffer, {f: jnp.asarray(block[f], jnp.float32)
                                                                for f in BLOCK_FIELDS})
 
