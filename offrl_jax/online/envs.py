@@ -1,0 +1,145 @@
+"""The online phase's environments: one gymnasium env per member on the host, stepped together with actions for every
+member from one jitted policy call per step, and `collect`, which gathers K steps of every member as one block.
+
+Member m's env starts every episode with a reset seeded by (its seed, the env step at which the episode starts)
+(`reset_seed`), so what it collects is a pure function of its seed and the actions it is given: member (j, i) of a
+sweep steps what a single run with seed i steps, and a run that resumes an episode from a saved env state needs no
+random-number state.  A step that is both terminated and truncated is a terminal (as in the offline datasets); the
+recorded next observation is the env's real s_{t+1}, also at a time-out, never the reset observation.
+"""
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from offrl_jax.driver import PHASE_START, seed_keys
+from offrl_jax.envs.registry import make_env
+
+EXPLORE = PHASE_START + 1  # the key stream of exploration noise, after the driver's
+RESET_ENTROPY = 0x0F1E  # tells the envs' reset seeds apart from evaluation's start states
+
+
+def reset_seed(seed: int, step: int) -> int:
+    """The reset seed of an episode that a member with run seed `seed` starts at env step `step`."""
+    return int(np.random.SeedSequence([RESET_ENTROPY, seed, step]).generate_state(1)[0])
+
+
+class NonFiniteObservation(ValueError):
+    """An env returned a NaN or infinite observation or reward."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Episode:
+    """An episode that ended while collecting: its member, the env steps it took, its undiscounted return, whether
+    it ended in a terminal (else the time limit cut it), and the env step (counted from the phase's start) it ended
+    at."""
+    member: int
+    length: int
+    return_: float
+    terminal: bool
+    end_step: int
+
+
+class MemberEnvs:
+    """S envs of `env_name` (or `make()`), env m for the member with run seed `seeds[m]`; reset on creation.
+
+    `observations` (S, obs_dim) are what the next step acts on; `step_count` is the env steps every env has taken.
+    """
+
+    def __init__(self, env_name: str, seeds: Sequence[int], make: Callable[[], Any] | None = None):
+        self.seeds = tuple(int(s) for s in seeds)
+        self.envs = [make() if make is not None else make_env(env_name, disable_env_checker=True) for _ in self.seeds]
+        space = self.envs[0].action_space
+        if not (np.allclose(space.low, -1.0) and np.allclose(space.high, 1.0)):
+            raise ValueError(f"{env_name}: expected actions in [-1, 1], got [{space.low}, {space.high}]")
+        self.horizon = getattr(self.envs[0].spec, "max_episode_steps", None)
+        if not self.horizon:
+            raise ValueError(f"{env_name}: the online phase needs an env with a time limit")
+        self.act_dim = space.shape[0]
+        self.step_count = 0
+        self.episode_return = np.zeros(len(self.envs))
+        self.episode_length = np.zeros(len(self.envs), np.int64)
+        self.observations = np.stack([self._reset(m) for m in range(len(self.envs))])
+
+    def _reset(self, member: int) -> np.ndarray:
+        obs, _ = self.envs[member].reset(seed=reset_seed(self.seeds[member], self.step_count))
+        self._check(member, obs, 0.0, "reset")
+        return np.asarray(obs, np.float32)
+
+    def _check(self, member: int, obs: np.ndarray, reward: float, what: str) -> None:
+        if not (np.all(np.isfinite(obs)) and np.isfinite(reward)):
+            raise NonFiniteObservation(f"member {member} (seed {self.seeds[member]}): the env returned a non-finite "
+                                       f"observation or reward at its {what} at env step {self.step_count}")
+
+    def step(self, actions: np.ndarray) -> tuple[dict[str, np.ndarray], list[Episode]]:
+        """Step every env with its action ((S, act_dim)): (the transitions, `BLOCK_FIELDS` each (S, ...), float32;
+        the episodes they ended).  Envs whose episode ended are reset, their next `observations` the reset's."""
+        actions = np.asarray(actions, np.float32)
+        if actions.shape != (len(self.envs), self.act_dim):
+            raise ValueError(f"expected actions of shape {(len(self.envs), self.act_dim)}, got {actions.shape}")
+        out = {"observations": self.observations.copy(), "actions": actions,
+               "next_observations": np.zeros_like(self.observations), "rewards": np.zeros(len(self.envs), np.float32),
+               "terminals": np.zeros(len(self.envs), np.float32), "timeouts": np.zeros(len(self.envs), np.float32)}
+        ended = []
+        for m, env in enumerate(self.envs):
+            obs, reward, terminated, truncated, _ = env.step(actions[m])
+            self._check(m, obs, reward, "step")
+            out["next_observations"][m], out["rewards"][m] = obs, reward
+            out["terminals"][m], out["timeouts"][m] = float(terminated), float(truncated and not terminated)
+            self.episode_return[m] += reward
+            self.episode_length[m] += 1
+            if terminated or truncated:
+                ended.append(Episode(m, int(self.episode_length[m]), float(self.episode_return[m]), bool(terminated),
+                                     self.step_count + 1))
+                self.episode_return[m], self.episode_length[m] = 0.0, 0
+        self.step_count += 1
+        self.observations = out["next_observations"].copy()
+        for episode in ended:
+            self.observations[episode.member] = self._reset(episode.member)
+        return out, ended
+
+    def close(self) -> None:
+        for env in self.envs:
+            env.close()
+
+
+def collect(envs: MemberEnvs, policy: Callable[[np.ndarray, int], Any], steps: int
+            ) -> tuple[dict[str, np.ndarray], list[Episode]]:
+    """`steps` (K) env steps of every member: (a block, `BLOCK_FIELDS` each (S, K, ...) float32, raw observations
+    and rewards (`offrl_jax.online.buffer.device_rows` puts them in device form); the episodes that ended, in order).
+
+    `policy(observations (S, obs_dim), env step) -> (S, act_dim)` acts for every member at once: one call, one
+    transfer of S observations and S actions per step."""
+    if steps < 1:
+        raise ValueError(f"a block has at least one step, not {steps}")
+    rows, episodes = [], []
+    for _ in range(steps):
+        transition, ended = envs.step(np.asarray(policy(envs.observations, envs.step_count)))
+        rows.append(transition)
+        episodes.extend(ended)
+    return {f: np.stack([r[f] for r in rows], axis=1) for f in rows[0]}, episodes
+
+
+def exploration_policy(act: Callable[[Any, jax.Array], jax.Array], obs_mean: np.ndarray, obs_std: np.ndarray,
+                       noise: float) -> Callable:
+    """jit(vmap over members) of `act` on normalised observations plus Gaussian noise of std `noise`, clipped to
+    [-1, 1] (TD3's exploration, for deterministic actors): (states (S..), keys (S, 2), observations (S, D), env step)
+    -> (S, A).  The noise of member m at step t uses fold_in(keys[m], t): `exploration_keys(seeds)`."""
+    mean, std = jnp.asarray(obs_mean), jnp.asarray(obs_std)
+
+    def one(state, key, obs, step):
+        action = act(state, (obs - mean) / std)
+        eps = jax.random.normal(jax.random.fold_in(key, step), action.shape)
+        return jnp.clip(action + noise * eps, -1.0, 1.0)
+
+    return jax.jit(jax.vmap(one, in_axes=(0, 0, 0, None)))
+
+
+def exploration_keys(seeds: Sequence[int]) -> jax.Array:
+    """(S, 2) the members' exploration keys: fold_in(PRNGKey(seed), EXPLORE)."""
+    return seed_keys(tuple(seeds), EXPLORE)
