@@ -1,6 +1,7 @@
 """The fidelity command (`experiments.fidelity`): the target bands, the table built from two studies' summaries
 (hand-made here), and a tiny end-to-end run that writes fidelity.json."""
 import json
+import math
 
 import pytest
 
@@ -61,3 +62,24 @@ def test_fidelity_takes_no_flag_it_would_ignore(tmp_path):
     assert dry.returncode == 0, dry.stderr
     assert "study bc" in dry.stdout and "study td3bc" in dry.stdout and "30,000 updates" in dry.stdout
     assert "alpha = 2.5  (study)" in dry.stdout and list(tmp_path.iterdir()) == []
+
+
+def test_scan_scores_each_checkpoint_of_a_sac_run(tmp_path):
+    """A tiny SAC run's checkpoint: its behaviour sample and BC on it, one line in scan.jsonl; a missing step is
+    one line, nothing written."""
+    from offrl_jax.data.generate.sac import SACConfig, train
+
+    run = tmp_path / "sac"
+    train("hopper", 300, run, seed=0, cfg=SACConfig(hidden=(32, 32), batch_size=32, warmup_steps=100),
+          eval_every=150, eval_episodes=1, progress=False, max_episode_steps=50)
+    missing = run_module("experiments.scan_checkpoints", "--run", run, "--steps", "200", "--out", tmp_path / "none")
+    assert missing.returncode == 2 and "no checkpoint at step 200" in missing.stderr
+    assert not (tmp_path / "none").exists()
+    out = tmp_path / "scan"
+    done = run_module("experiments.scan_checkpoints", "--run", run, "--steps", "150", "--transitions", "400",
+                      "--seeds", "1", "--bc-updates", "40", "--out", out)
+    assert done.returncode == 0, done.stderr
+    line = json.loads((out / "scan.jsonl").read_text())
+    assert line["step"] == 150 and line["transitions"] == 400
+    assert math.isfinite(line["bc"]) and math.isfinite(line["behaviour"])  # normalised scores of real rollouts
+    assert (out / "hopper-150-n400-bc-s1-u40" / "fidelity.json").exists()
