@@ -15,6 +15,7 @@ table, which the command prints.
 from __future__ import annotations
 
 import json
+import sys
 import time
 from pathlib import Path
 
@@ -98,7 +99,7 @@ def print_table(result: dict) -> None:
 def main(argv=None) -> int:
     p = make_parser()
     args, _ = p.parse_known_args(argv)
-    argv = list(argv) if argv is not None else __import__("sys").argv[1:]
+    argv = list(argv) if argv is not None else sys.argv[1:]
     out = args.resume or args.out
     if out is None and args.config is None and not any(a in argv for a in ("-h", "--help")):
         out = Path("runs") / "fidelity" / f"{Path(args.dataset_path).stem if args.dataset_path else args.env}-" \
