@@ -25,6 +25,10 @@ from offrl_jax.nets import INITS, Arch
 #   "stop"       r, as at a terminal (the authors' code: dones = terminals + timeouts)
 #   "drop"       the row is never sampled (CORL's loader drops it: its next observation is not recorded)
 TIMEOUTS = ("bootstrap", "stop", "drop")
+REPLAY_MODES = ("mix", "append", "online-only")  # `offrl_jax.online.sampling`
+# the fields only an online phase reads: flags of the fine-tuning study alone (a study that never goes online would
+# ignore them); a family adds its own online fields to this set
+ONLINE_FIELDS = frozenset({"replay", "online_mix", "explore_noise", "online_critic_beta", "online_actor_beta_floor"})
 PretrainMode = Literal["none", "actor", "critic", "actor+critic"]
 
 
@@ -58,6 +62,13 @@ class Config:
     lam: float = 0.0  # TD weight in critic pre-training (0 = pure MC; the paper: 0 or 0.1)
     # how lam mixes: the authors' normalised losses (loss) or eq. 5's targets (target)
     lambda_mode: Literal["loss", "target"] = "loss"
+    # online fine-tuning (`experiments.finetune`; `ONLINE_FIELDS`): how each online minibatch is drawn (REPLAY_MODES):
+    # mix = a fixed share from the online buffer (Cal-QL, CORL's ReBRAC), append = online rows join the dataset
+    # (CORL's IQL), online-only = the dataset is dropped (WSRL)
+    replay: str = "mix"
+    online_mix: float = 0.5  # the online share of each minibatch with replay "mix" (Cal-QL and CORL's ReBRAC: 0.5)
+    # std of the Gaussian noise added online to a deterministic actor's action (TD3's 0.1); a stochastic actor samples
+    explore_noise: float = 0.1
 
     def __post_init__(self):
         check_types(self)
@@ -81,6 +92,9 @@ class Config:
             ("layer_norm_eps", self.layer_norm_eps > 0, "must be positive"),
             ("init", self.init in INITS, f"must be one of {', '.join(INITS)}"),
             ("timeouts", self.timeouts in TIMEOUTS, f"must be one of {', '.join(TIMEOUTS)}"),
+            ("replay", self.replay in REPLAY_MODES, f"must be one of {', '.join(REPLAY_MODES)}"),
+            ("online_mix", 0.0 <= self.online_mix <= 1.0, "must be in [0, 1]"),
+            ("explore_noise", self.explore_noise >= 0, "must be >= 0"),
         ])
 
     def auto_stop(self, monitor: tuple[str, ...]) -> AutoStop | None:

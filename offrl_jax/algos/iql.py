@@ -53,6 +53,8 @@ class IQLConfig(Config):
     # the actor's learning rate follows a cosine from actor_lr to 0 over this many actor updates (CORL: its 1M-update
     # budget; 0 = constant)
     actor_lr_decay: int = 1_000_000
+    replay: str = "append"  # CORL's IQL fine-tunes on the dataset with the online rows appended
+    explore_noise: float = 0.03  # CORL's IQL noise for a deterministic actor (the Gaussian policy samples instead)
 
     SWEEPABLE: ClassVar[tuple[str, ...]] = ("expectile", "beta", "tau")
 
@@ -97,6 +99,14 @@ class IQL:
     def act(self, state: IQLState, obs: jax.Array) -> jax.Array:
         out = self.actor.apply(state.actor.params, obs)
         return out if self.cfg.deterministic else out[0]
+
+    def explore(self, state: IQLState, obs: jax.Array, key: jax.Array) -> jax.Array | None:
+        """Online, the Gaussian policy acts with a sample, clipped to [-1, 1] (CORL's IQL); a deterministic actor
+        has none (None: its action plus `explore_noise`)."""
+        if self.cfg.deterministic:
+            return None
+        mean, log_std = self.actor.apply(state.actor.params, obs)
+        return jnp.clip(mean + jnp.exp(log_std) * jax.random.normal(key, mean.shape), -1.0, 1.0)
 
     def phases(self, total_updates: int) -> list[Phase]:
         return stage_phases(self.cfg.schedule(total_updates), {

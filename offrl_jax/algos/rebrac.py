@@ -61,6 +61,11 @@ class ReBRACConfig(Config):
     normalize_q: bool = True  # divide the actor's Q term by sg(mean |Q|)
     hidden_bias: float | None = 0.1  # constant hidden-layer bias (CORL's ReBRAC, after EDAC); None: the init's own
     out_init: bool = True  # final layers U(+-1e-3) actor, U(+-3e-3) critics; False: the init scheme's own
+    explore_noise: float = 0.0  # CORL's ReBRAC fine-tunes without exploration noise (expl_noise 0)
+    online_critic_beta: float = 0.0  # the critic penalty online: 0 (CORL's fine-tuning drops it), the only value yet
+    # online, the actor penalty decays linearly from actor_beta towards this fraction of it over the online updates,
+    # then stays there (CORL's min_decay_coef; 1 = no decay)
+    online_actor_beta_floor: float = 0.5
 
     SWEEPABLE: ClassVar[tuple[str, ...]] = ("actor_beta", "critic_beta", "tau", "policy_noise", "noise_clip")
 
@@ -72,6 +77,9 @@ class ReBRACConfig(Config):
             ("policy_noise", self.policy_noise >= 0, "must be >= 0"),
             ("noise_clip", self.noise_clip >= 0, "must be >= 0"),
             ("policy_delay", self.policy_delay >= 1, "must be >= 1"),
+            ("online_critic_beta", self.online_critic_beta == 0, "must be 0, CORL's fine-tuning (online rows do not "
+             "record the next action the critic penalty reads)"),
+            ("online_actor_beta_floor", 0 <= self.online_actor_beta_floor <= 1, "must be in [0, 1]"),
             ("pretrain_auto_window", not self.pretrain_auto or self.pretrain_auto_window % self.policy_delay == 0,
              f"must be a multiple of policy_delay ({self.policy_delay})"),
         ])
@@ -110,6 +118,13 @@ class ReBRAC:
 
     def act(self, state: ReBRACState, obs: jax.Array) -> jax.Array:
         return self.actor.apply(state.actor.params, obs)
+
+    def online_values(self, progress: jax.Array) -> dict[str, jax.Array]:
+        """The penalties online, at `progress` (online updates done / all of them, traced): CORL's fine-tuning, the
+        critic's at `online_critic_beta`, the actor's decaying linearly to `online_actor_beta_floor` of its own."""
+        cfg = self.cfg
+        decay = jnp.maximum(cfg.online_actor_beta_floor, 1.0 - progress)
+        return {"critic_beta": cfg.online_critic_beta, "actor_beta": cfg.actor_beta * decay}
 
     def phases(self, total_updates: int) -> list[Phase]:
         return stage_phases(self.cfg.schedule(total_updates), {

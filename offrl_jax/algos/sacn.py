@@ -155,6 +155,10 @@ class SACN:
         mean, _ = self.actor.apply(state.actor.params, obs)
         return jnp.tanh(mean)
 
+    def explore(self, state: SACNState, obs: jax.Array, key: jax.Array) -> jax.Array:
+        """Online the policy acts with a sample of its tanh-Gaussian (SAC's exploration)."""
+        return self.sample_policy(state.actor.params, obs, key)[0]
+
     def phases(self, total_updates: int) -> list[Phase]:
         return stage_phases(self.cfg.schedule(total_updates), {
             "actor_pretrain": single(chain(self.temperature_update, self.soft_bc_update)),

@@ -119,6 +119,12 @@ class TD3BC:
     def act(self, state: TD3BCState, obs: jax.Array) -> jax.Array:
         return self.actor.apply(state.actor.params, obs)
 
+    @property
+    def reads_returns(self) -> bool:
+        """Whether offline RL reads the Monte-Carlo returns (max(MC, TD) targets): online, only rows of ended
+        episodes, whose returns are known, are then drawn."""
+        return self.cfg.target == "max_mc"
+
     def phases(self, total_updates: int) -> list[Phase]:
         return stage_phases(self.cfg.schedule(total_updates), {
             "actor_pretrain": single(self.bc_update), "offline_rl": self.rl_update,

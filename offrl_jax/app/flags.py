@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from offrl_jax.algos import FAMILIES
-from offrl_jax.algos.config import TIMEOUTS
+from offrl_jax.algos.config import REPLAY_MODES, TIMEOUTS
 from offrl_jax.losses import BALANCES
 from offrl_jax.nets import INITS, TANH_LOG_DETS
 from offrl_jax.run.loggers import LOGGERS
@@ -43,7 +43,8 @@ NOT_FLAGS = frozenset({"pretrain", "pretrain_updates", "pretrain_auto", "bc_only
 # the fields that have a flag (`add_config_flags` leaves out a study's `omit` too)
 FLAG_FIELDS = frozenset(f.name for cls in CONFIGS for f in dataclasses.fields(cls)) - NOT_FLAGS
 # the accepted values of the str fields, the same tuples their configs' __post_init__ checks use
-CHOICES = {"init": INITS, "timeouts": TIMEOUTS, "balance": BALANCES, "tanh_log_det": TANH_LOG_DETS}
+CHOICES = {"init": INITS, "timeouts": TIMEOUTS, "balance": BALANCES, "tanh_log_det": TANH_LOG_DETS,
+           "replay": REPLAY_MODES}
 ALIASES = {"actor_layer_norm": ("--actor-ln",), "critic_layer_norm": ("--critic-ln",),
            "layer_norm_affine": ("--ln-affine",)}
 

@@ -13,6 +13,7 @@ import re
 from pathlib import Path
 
 from offrl_jax.algos import ALGOS, PRESETS
+from offrl_jax.algos.config import ONLINE_FIELDS
 from offrl_jax.app.flags import FLAG_FIELDS, add_config_flags, config_values, run_args, sweepable_fields
 from offrl_jax.data.readers import FILE_SUFFIXES
 from offrl_jax.run.study import Study, Variant
@@ -26,10 +27,12 @@ LABELS = {"actor+critic": "pretrained", "none": "scratch", "actor": "actor-only"
 
 def parser(prog: str, doc: str, updates: int = 100_000,
            eval_every: int = 5_000, env: str = "hopper", omit: tuple[str, ...] = (), preset: bool = False,
-           seeds: int = 3, eval_episodes: int = 10, default_preset: str | None = None) -> argparse.ArgumentParser:
+           seeds: int = 3, eval_episodes: int = 10, default_preset: str | None = None,
+           online: bool = False) -> argparse.ArgumentParser:
     """The flags every MuJoCo study shares; studies pass their own defaults, leave out the flags they set
     themselves (`omit`: destinations, e.g. ("pretrain", "lam")), and only the main job has `--preset paper`
-    (`preset`); `default_preset` names the config preset the study applies when no --preset is given.  Each
+    (`preset`); `default_preset` names the config preset the study applies when no --preset is given; the config
+    fields only an online phase reads (`ONLINE_FIELDS`) are flags of a study with one (`online`).  Each
     hyper-parameter's stated default is the study's own, read from what it builds when its help is shown
     (`offrl_jax.app.dry_run.state_defaults`)."""
     p = OneLineParser(prog=prog, description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -65,7 +68,7 @@ def parser(prog: str, doc: str, updates: int = 100_000,
     else:
         add("--preset", nargs=1, choices=tuple(PRESETS), default=None, help=help_authors + ".  " + help_default)
     p.set_defaults(default_preset=default_preset)
-    add_config_flags(p, omit)
+    add_config_flags(p, tuple(omit) + (() if online else tuple(ONLINE_FIELDS)))
     run_args(p, updates=updates, eval_every=eval_every, seeds=seeds, eval_episodes=eval_episodes)
     return p
 

@@ -126,16 +126,21 @@ def collect(envs: MemberEnvs, policy: Callable[[np.ndarray, int], Any], steps: i
 
 
 def exploration_policy(act: Callable[[Any, jax.Array], jax.Array], obs_mean: np.ndarray, obs_std: np.ndarray,
-                       noise: float) -> Callable:
-    """jit(vmap over members) of `act` on normalised observations plus Gaussian noise of std `noise`, clipped to
-    [-1, 1] (TD3's exploration, for deterministic actors): (states (S..), keys (S, 2), observations (S, D), env step)
-    -> (S, A).  The noise of member m at step t uses fold_in(keys[m], t): `exploration_keys(seeds)`."""
+                       noise: float, sample: Callable[[Any, jax.Array, jax.Array], jax.Array | None] | None = None
+                       ) -> Callable:
+    """jit(vmap over members) of the online action on normalised observations: (states (S..), keys (S, 2),
+    observations (S, D), env step) -> (S, A).  `sample(state, obs, key)`, where the family has one and it gives an
+    action (a stochastic actor's sample), else `act` plus Gaussian noise of std `noise`, clipped to [-1, 1] (TD3's
+    exploration, for deterministic actors).  Member m at step t uses fold_in(keys[m], t): `exploration_keys(seeds)`."""
     mean, std = jnp.asarray(obs_mean), jnp.asarray(obs_std)
 
     def one(state, key, obs, step):
-        action = act(state, (obs - mean) / std)
-        eps = jax.random.normal(jax.random.fold_in(key, step), action.shape)
-        return jnp.clip(action + noise * eps, -1.0, 1.0)
+        key, x = jax.random.fold_in(key, step), (obs - mean) / std
+        sampled = None if sample is None else sample(state, x, key)
+        if sampled is not None:
+            return sampled
+        action = act(state, x)
+        return jnp.clip(action + noise * jax.random.normal(key, action.shape), -1.0, 1.0)
 
     return jax.jit(jax.vmap(one, in_axes=(0, 0, 0, None)))
 

@@ -23,10 +23,13 @@ import dataclasses
 import jax
 import jax.numpy as jnp
 
+from offrl_jax.algos.config import REPLAY_MODES
 from offrl_jax.data.device import DATA_FIELDS
 from offrl_jax.online.buffer import OnlineBuffer
 
-REPLAY_MODES = ("mix", "append", "online-only")
+# beyond a dataset's device form, present for an algorithm that reads them: ReBRAC's next dataset actions
+OPTIONAL_FIELDS = ("next_actions",)
+
 
 
 @dataclasses.dataclass(frozen=True)
@@ -84,6 +87,10 @@ def sample(key: jax.Array, replay: Replay, data: dict[str, jax.Array], buffer: O
     for f in DATA_FIELDS:
         off, on = data[f][offline], buffer.arrays[f][pos]
         batch[f] = jnp.where(online.reshape(online.shape + (1,) * (off.ndim - online.ndim)), on, off)
+    for f in OPTIONAL_FIELDS:  # an online row has no next dataset action: its own stands in (read with weight 0)
+        if f in data:
+            off = data[f][offline]
+            batch[f] = jnp.where(online[..., None], buffer.arrays["actions"][pos], off)
     batch["idx"] = jnp.where(online, total + pos, offline)
     batch["online"] = online.astype(jnp.float32)
     return batch
