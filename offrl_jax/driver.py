@@ -38,11 +38,11 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
 from offrl_jax.algos.common import Phase, with_hparams
 from offrl_jax.data.dataset import rows_without_timeouts
 from offrl_jax.data.device import DATA_FIELDS
+from offrl_jax.online.sampling import OPTIONAL_FIELDS, Replay, sample
 from offrl_jax.system.distributed import to_host
 
-# beyond a dataset's device form (`offrl_jax.data.device`), on the device only for an algorithm that reads them
-# (`uses_next_actions`): ReBRAC's critic penalty
-OPTIONAL_FIELDS = ("next_actions",)
+# beyond a dataset's device form (`offrl_jax.data.device`), the fields on the device only for an algorithm that
+# reads them (`uses_next_actions`: ReBRAC's critic penalty) are `offrl_jax.online.sampling.OPTIONAL_FIELDS`
 
 
 def next_actions(actions: jax.Array, terminals: jax.Array, timeouts: jax.Array) -> jax.Array:
@@ -139,7 +139,9 @@ def member_layout(members: int, devices=None, mode: str | None = None) -> Layout
 
 def make_chunk_fn(phase: Phase, batch_size: int, num_calls: int,
                   phase_for: Callable[[dict[str, jax.Array]], Phase] | None = None,
-                  layout: Layout | None = None) -> Callable:
+                  layout: Layout | None = None, replay: Replay | None = None,
+                  phase_at: Callable[[dict[str, jax.Array] | None, jax.Array], Phase] | None = None,
+                  swept: bool = False) -> Callable:
     """jit(members(scan of `num_calls` update calls)):
     (states (M..), data, keys (M, 2), start update ()) -> (states, metrics (M, ...)).
 
@@ -147,21 +149,31 @@ def make_chunk_fn(phase: Phase, batch_size: int, num_calls: int,
 
     `keys` are the members' run keys (`seed_keys(seeds, CHUNK)`); the call at global update u uses fold_in(key, u),
     so the result does not depend on where chunks begin.  With `phase_for` (a sweep: hyper-parameters -> the phase
-    built with them) the function takes a 5th argument, hparams: {name: (S,) values}, and member m runs
+    built with them) the function takes a last argument, hparams: {name: (S,) values}, and member m runs
     `phase_for({name: value_m})`.
+
+    The online phase: with `replay` the function takes the members' online buffers (`offrl_jax.online.buffer`,
+    leading axis M) after the start update, and each minibatch is drawn from the data and the member's buffer
+    (`offrl_jax.online.sampling.sample`); `phase_at(hparams or None, u)` gives the phase of update u (a schedule
+    over the phase, e.g. a decaying penalty) in place of `phase` / `phase_for`; `swept` then says whether the
+    function takes the hparams argument (a sweep).
     """
 
-    def one_seed(state, data, key, start, hparams):
+    def one_seed(state, data, key, start, buffer, hparams):
         member_phase = phase if phase_for is None else phase_for(hparams)
         rows = data.get("rows")  # the rows that may be sampled, when some are excluded (timeouts="drop")
         n = data["rewards"].shape[0] if rows is None else rows.shape[0]
 
         def body(state, update):
             k_idx, k_update = jax.random.split(jax.random.fold_in(key, update))
-            idx = jax.random.randint(k_idx, (member_phase.updates_per_call, batch_size), 0, n)
+            now = member_phase if phase_at is None else phase_at(hparams, update)
+            shape = (now.updates_per_call, batch_size)
+            if replay is not None:
+                return now.update(state, sample(k_idx, replay, data, buffer, shape), k_update)
+            idx = jax.random.randint(k_idx, shape, 0, n)
             idx = idx if rows is None else rows[idx]
             batch = {k: data[k][idx] for k in DATA_FIELDS + OPTIONAL_FIELDS if k in data} | {"idx": idx}
-            return member_phase.update(state, batch, k_update)
+            return now.update(state, batch, k_update)
 
         updates = start + member_phase.updates_per_call * jnp.arange(num_calls, dtype=jnp.int32)
         state, metrics = jax.lax.scan(body, state, updates)
@@ -169,9 +181,16 @@ def make_chunk_fn(phase: Phase, batch_size: int, num_calls: int,
         finite &= jnp.all(jnp.stack([jnp.all(jnp.isfinite(p)) for p in jax.tree.leaves(state)]))
         return state, jax.tree.map(lambda m: jnp.mean(m, axis=0), metrics) | {"finite": finite}
 
-    fn, in_axes = one_seed, (0, None, 0, None, 0)
-    if phase_for is None:
-        fn, in_axes = (lambda s, d, k, u: one_seed(s, d, k, u, None)), in_axes[:4]
+    swept = swept or phase_for is not None
+    args = ["state", "data", "key", "start"] + (["buffer"] if replay is not None else []) + (["hparams"] if swept
+                                                                                                else [])
+    in_axes = tuple({"data": None, "start": None}.get(a, 0) for a in args)
+
+    def fn(*values):
+        named = dict(zip(args, values))
+        return one_seed(named["state"], named["data"], named["key"], named["start"], named.get("buffer"),
+                        named.get("hparams"))
+
     mode = layout.mode if layout is not None else default_mode()
     fn = over_members(fn, in_axes, mode)
     if layout is not None and layout.mesh.size > 1:  # each device runs `fn` on its own block of members
@@ -214,6 +233,7 @@ class Chunk:
     seconds: float  # wall-clock seconds of training so far (compilation included, evaluation excluded)
     updates_per_s: float
     ended: bool = False  # this chunk ended a self-ending (auto_stop) phase before its cap
+    env_steps: int | None = None  # the online phase: env steps every member has taken (updates_per_s: env steps/s)
 
 
 def _swept_on_start(phase_for: Callable[[dict[str, jax.Array]], Phase]) -> Callable:

@@ -26,6 +26,9 @@ STUDIES = {
     "experiments.replay": [*MUJOCO, "--dataset-path", "{hopper}"],
     "experiments.figure2": [*MUJOCO, "--dataset-path", "{hopper}", "--envs", "hopper", "--algos", "td3bc", "edac",
                             "--edac-updates", "200", "--edac-eval-every", "100", "--num-critics", "2"],
+    "experiments.finetune": [*MUJOCO, "--dataset-path", "{hopper}", "--env", "hopper", "--arms", "pretrained",
+                             "scratch", "--online-steps", "200", "--online-block", "100", "--online-eval-every", "100",
+                             "--replay", "append"],
     "experiments.adroit_door": [*TINY, "--dataset-path", "{door}", "--variants", "BC", "pre-trained TD3+BC+CQL",
                                 "--scale", "0.001", "--alpha", "1"],
 }

@@ -29,6 +29,11 @@ def describe(studies: list[Study]) -> str:
                   f"updates ({study.eval_episodes} episode{'s' * (study.eval_episodes != 1)} per seed)"
                   + (f", final score over updates {study.final_window[0]:,}-{study.final_window[1]:,}"
                      if study.final_window else "")]
+        if study.online is not None:
+            o = study.online
+            lines.append(f"  online: {o.steps:,} env steps per seed after the offline phases ({o.updates():,} "
+                         f"updates), blocks of {o.block:,}, utd {o.utd}, warm-up {o.warmup:,}, buffer "
+                         f"{o.capacity or 'every step'}, evaluation every {o.eval_every:,} env steps")
         resolved, sources = study.resolved(), study.sources()
         for v in study.variants:
             config = study.config(v.label)

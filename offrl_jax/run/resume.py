@@ -38,10 +38,13 @@ class ResumeMismatch(ValueError):
 def checkpoint_path(out_dir: Path, group: tuple[Variant, ...], which: str | int = "last") -> Path:
     """checkpoints/<labels>.msgpack: a group's last complete chunk (what --resume continues); with which="best",
     checkpoints/<label>.best.msgpack: one variant's seeds at its best seed-mean evaluation so far; with an update
-    number, checkpoints/<labels>.<update>.msgpack: a group's checkpoint kept from that update (`keep_checkpoints`)."""
+    number, checkpoints/<labels>.<update>.msgpack: a group's checkpoint kept from that update (`keep_checkpoints`);
+    with "handover", checkpoints/<labels>.handover.msgpack: the states an online phase starts from."""
     if which == "best":
         return out_dir / "checkpoints" / f"{group[0].label}.best.msgpack"
     labels = "+".join(v.label for v in group)
+    if which == "handover":  # a run with an online phase: the offline phases' last states, where online starts
+        return out_dir / "checkpoints" / f"{labels}.handover.msgpack"
     return out_dir / "checkpoints" / (f"{labels}.msgpack" if which == "last" else f"{labels}.{int(which)}.msgpack")
 
 
@@ -59,6 +62,8 @@ def group_identity(study: Study, group: tuple[Variant, ...], data_sha256: str) -
                 "resolved": [resolved[v.label] for v in group], "seeds": list(study.seeds),
                 "batch_size": study.batch_size, "env": study.env, "data": data_sha256,
                 "evaluation": {"eval_every": study.eval_every, "eval_episodes": study.eval_episodes}}
+    if study.online is not None:  # not its env steps: a budget a resume may extend
+        identity["online"] = {k: v for k, v in dataclasses.asdict(study.online).items() if k != "steps"}
     return json.loads(json.dumps(identity, default=list))  # tuples as lists, as they come back from a file
 
 
@@ -66,9 +71,12 @@ def identity_differences(saved: dict[str, Any], current: dict[str, Any], config_
     """What differs between a checkpoint's identity and the study's, by name.  A config field the checkpoint does
     not know (added to the code since) is no difference while the study keeps its default."""
     names = {"variants": "variants", "seeds": "seeds", "batch_size": "batch size", "env": "env",
-             "data": "dataset (SHA-256)", "evaluation": "evaluation interval or episodes"}
-    found = [name for key, name in names.items()  # (checkpoints before 2026-12-02 did not record their evaluation)
-             if saved.get(key) != current.get(key) and not (key == "evaluation" and key not in saved)]
+             "data": "dataset (SHA-256)", "evaluation": "evaluation interval or episodes",
+             "online": "online settings"}
+    # (checkpoints before 2026-12-02 did not record their evaluation; an offline run's has no online settings: an
+    # online phase may follow it)
+    found = [name for key, name in names.items()
+             if saved.get(key) != current.get(key) and not (key in ("evaluation", "online") and key not in saved)]
     for j, (old, new) in enumerate(zip(saved.get("resolved", []), current["resolved"])):
         label = current["variants"][j][0]
         for key in sorted(set(old) | set(new)):
@@ -179,8 +187,9 @@ def check_resume(study: Study, out_dir: Path, ds, data_sha256: str) -> None:
                                  "nothing was changed")
         strangers = sorted({str(r.get("variant")) for r in history} - labels)
         last_row = max((r.get("update", -1) for r in history if isinstance(r, dict)), default=update)
-        if update > study.updates or update < 0 or last_row != update or strangers:
-            why = (f"it is at update {update}, past the budget of {study.updates}" if update > study.updates else
+        budget = study.updates + (study.online.updates() if study.online else 0)
+        if update > budget or update < 0 or last_row != update or strangers:
+            why = (f"it is at update {update}, past the budget of {budget}" if update > budget else
                    f"its update counter ({update}) does not match its last evaluation ({last_row})"
                    if update < 0 or last_row != update else
                    f"it holds rows of other variants ({', '.join(strangers[:3])})")

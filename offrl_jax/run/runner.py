@@ -38,6 +38,7 @@ from offrl_jax.data.dataset import Dataset
 from offrl_jax.data.device import DeviceData, DeviceForms, device_data
 from offrl_jax.driver import Driver
 from offrl_jax.envs.evaluate import evaluate_normalized, make_policy
+from offrl_jax.online.loop import run_online
 from offrl_jax.run.bc_level import figure_lines
 from offrl_jax.run.loggers import make_logger
 from offrl_jax.run.provenance import fingerprint
@@ -91,7 +92,8 @@ def run_study(study: Study, out_dir: Path, dataset: Dataset, resume: bool = Fals
             logger = None
     if writer:
         atomic_write_text(config_path, record)
-    bar = _Progress(len(study.variants) * study.updates, progress, quiet=not writer)
+    online_updates = study.online.updates() if study.online else 0
+    bar = _Progress(len(study.variants) * (study.updates + online_updates), progress, quiet=not writer)
     recorder = _Recorder(out_dir / "curves.csv" if writer else None, [v.label for v in study.variants],
                          logger if writer else None)
     pretrain_ends: dict[str, int] = {}
@@ -227,13 +229,25 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
 
     member_names = [(v, seed) for v in group for seed in seeds]  # member j * S + i = (variant j, seed i)
     ended, last_metrics = {}, None  # self-ended pre-training phases, for a resumed run
+    online = study.online
+    handover_path = checkpoint_path(out_dir, group, "handover")
     if resume and ckpt_path.exists():
         states, start, seconds, rows = load_checkpoint(ckpt_path, driver.init())
+        env_steps = max((r.get("env_steps", 0) for r in rows), default=0)
+        if online is not None and 0 < env_steps < online.steps:
+            # inside the online phase: it starts again from the hand-over, which it recomputes exactly (its
+            # randomness and the envs' resets are functions of the seeds and the env step)
+            states, start, seconds, rows = load_checkpoint(handover_path, driver.init())
+            bar.write(f"{name}: the online phase starts again from the hand-over (update {start}); it had reached "
+                      f"env step {env_steps:,}")
         ended = {r["phase"]: r["update"] for r in rows if r.get("phase_ended")}
         last_metrics = _metrics_at(rows, member_names, start)
         record()
+        if online is not None and env_steps >= online.steps:
+            bar.update((last_update + online.updates()) * len(group))
+            return pretrain_end
     bar.update(start * len(group))
-    if start >= last_update:
+    if start >= last_update and online is None:
         return pretrain_end
     every = study.checkpoint_every or study.eval_every
     last_saved = start
@@ -249,9 +263,20 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
         moved += updates
         bar.update(updates * len(group))
 
-    bar.status(f"{name} | compiling, then {min(study.eval_every, last_update - start):,} updates to the first "
-               "evaluation")
-    for chunk in driver.run(phases, study.eval_every, states, start, seconds, ended, last_metrics, on_slice):
+    bar.status(f"{name} | compiling, then {min(study.eval_every, max(last_update - start, 1)):,} updates to the "
+               "first evaluation")
+    handover = {"states": states, "seconds": seconds}  # the offline phases' last states, where online starts
+
+    def chunks():
+        for chunk in driver.run(phases, study.eval_every, states, start, seconds, ended, last_metrics, on_slice):
+            handover.update(states=chunk.states, seconds=chunk.seconds)
+            yield chunk
+        if online is not None:
+            scale = ds.reward_scale() if config.normalize_reward else 1.0
+            yield from run_online(driver, algo, online, study.env, data, handover["states"], last_update,
+                                  handover["seconds"], scale, on_slice)
+
+    for chunk in chunks():
         if recorder.stop.is_set():
             raise Stopped(f"{name} stopped at update {chunk.update}; last checkpoint: update {last_saved}")
         finite = np.asarray(chunk.metrics.pop("finite"), bool)
@@ -279,17 +304,21 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
         bar.update((chunk.update - start - moved) * len(group))
         start, moved = chunk.update, 0
         mean_score = float(np.nanmean(scores)) if alive.any() else float("nan")
-        bar.set_postfix_str(f"{name} | {chunk.phase} | {chunk.updates_per_s:.0f} upd/s | score "
+        rate = "upd/s" if chunk.env_steps is None else f"env steps/s | env step {chunk.env_steps:,}"
+        bar.set_postfix_str(f"{name} | {chunk.phase} | {chunk.updates_per_s:.0f} {rate} | score "
                             f"{mean_score:.1f} | eval {time.perf_counter() - tic:.1f}s")
         # checkpoints go on after a partial divergence: on resume the diverged seeds' NaN scores keep them out
         # the first evaluation too: a variant with rows in curves.csv always has a checkpoint to resume from
         # every evaluation (`checkpoint_every` 0), or the first one past each multiple of `checkpoint_every`
         due = not study.checkpoint_every or chunk.update // every > last_saved // every
-        if due or chunk.update == last_update or not ckpt_path.exists():
+        online_chunk = chunk.env_steps is not None  # online: every evaluation (a resume starts at the hand-over)
+        if due or online_chunk or chunk.update == last_update or not ckpt_path.exists():
             if writer:
                 save_checkpoint(ckpt_path, host_states, chunk.update, chunk.seconds, rows, meta)
-                if study.keep_checkpoints:
+                if study.keep_checkpoints and not online_chunk:
                     _keep(out_dir, group, chunk.update, study.keep_checkpoints)
+                if online is not None and not online_chunk and chunk.update == last_update:
+                    save_checkpoint(handover_path, host_states, chunk.update, chunk.seconds, rows, meta)
             last_saved = chunk.update
         for j, variant in enumerate(group):  # each variant's best evaluation so far (its seed mean) is kept too
             mine = slice(j * len(seeds), (j + 1) * len(seeds))
@@ -349,6 +378,7 @@ def _rows(members: list[tuple[Variant, int]], chunk, scores: np.ndarray) -> list
     return [
         {"variant": variant.label, "algo": variant.algo, "seed": seed, "phase": chunk.phase, "update": chunk.update,
          "seconds": round(chunk.seconds, 3), "score": float(scores[m])}
+        | ({} if chunk.env_steps is None else {"env_steps": chunk.env_steps})
         | {name: float(np.asarray(value)[m]) for name, value in sorted(chunk.metrics.items())}
         for m, (variant, seed) in enumerate(members)
     ]

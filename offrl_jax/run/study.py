@@ -14,6 +14,7 @@ from offrl_jax.algos import Config, Resolved, family_of, resolve
 from offrl_jax.data.dataset import Dataset
 from offrl_jax.driver import check_call_grid
 from offrl_jax.envs.registry import get_env_spec
+from offrl_jax.online.config import OnlineConfig
 from offrl_jax.run.provenance import run_record
 
 
@@ -84,11 +85,16 @@ class Study:
     # asymptote, and no updates/seconds to 90 %)
     final_window: tuple[int, int] | None = None  # final score = mean of evaluations in [lo, hi] (Adroit protocol)
     vmap_sweeps: bool = True  # variants differing only in one sweepable value (e.g. alpha) share one program
+    online: OnlineConfig | None = None  # after the offline phases, fine-tune online in the env (None: offline only)
 
     def __post_init__(self):
         for name in ("variants", "seeds", "final_window"):  # JSON's lists, stored as tuples (hashable, comparable)
             if isinstance(getattr(self, name), list):
                 object.__setattr__(self, name, tuple(getattr(self, name)))
+        if isinstance(self.online, dict):  # as config.json gives it back
+            object.__setattr__(self, "online", OnlineConfig(**self.online))
+        if self.online is not None and not isinstance(self.online, OnlineConfig):
+            raise ValueError(f"Study.online = {self.online!r:.100} must be an OnlineConfig or None")
         for name in ("name", "dataset", "env"):
             if not isinstance(getattr(self, name), str):
                 raise ValueError(f"Study.{name} = {getattr(self, name)!r} must be a string")
@@ -133,8 +139,11 @@ class Study:
         # budget before anything is written; everyone reads it from here (`config`)
         resolved = {v.label: v.resolve(self.env, self.dataset) for v in self.variants}
         configs = {label: r.config for label, r in resolved.items()}
-        for config in configs.values():
-            check_call_grid(config.schedule(self.updates), self.eval_every)
+        for label, config in configs.items():
+            stages = config.schedule(self.updates)
+            check_call_grid(stages, self.eval_every)
+            if self.online is not None:
+                self.online.check(label, stages[-1])
         object.__setattr__(self, "_configs", configs)  # not fields: not in to_json, equality or replace
         object.__setattr__(self, "_sources", {label: r.sources for label, r in resolved.items()})
         widest = max(len(group) for group, _ in self.groups()) * len(self.seeds)

@@ -1,0 +1,90 @@
+"""First imitate, then improve -- online: the offline phases of a family as the main job runs them, then an online
+phase of --online-steps env steps per seed in the same run, on the same member axis (`offrl_jax.online.loop`).
+
+Arms (--arms; each a variant, all with the same budgets, so the same offline updates and the same env steps):
+  pretrained      BC + MC critic pre-training, then offline RL, then online (the paper's method, continued)
+  scratch         offline RL from scratch, then online
+  pretrain-only   pre-training for the whole offline budget, no offline RL, then online (imitate, then improve in
+                  the environment)
+
+Default (no arguments): hopper-medium, TD3+BC (alpha 2.5, as the main job), the three arms, 5 seeds, 40k offline
+updates (10k of them pre-training), then 50k online env steps: blocks of 1,000 env steps, each followed by 1,000
+updates (utd 1), evaluation every 2.5k updates offline and every 5k env steps online.  curves.csv has an env_steps
+column for the online rows and the training episodes' mean score (train_score).
+
+How each family fine-tunes (its config fields, shown by --dry-run with their sources): minibatches half offline,
+half online (replay mix, online-mix 0.5: Cal-QL, CORL's ReBRAC), IQL's rows appended to the dataset (replay append:
+CORL's IQL); TD3+BC and ReBRAC explore with Gaussian noise on their action (explore-noise: TD3's 0.1, CORL's ReBRAC
+0), SAC-N/EDAC and IQL's Gaussian policy with a sample; ReBRAC drops its critic penalty and decays its actor
+penalty to half over the online phase (CORL); TD3+BC keeps its alpha (the behaviour term still tracks the data the
+minibatches mix in).  A resumed run whose online phase had begun starts it again from the hand-over checkpoint,
+which recomputes it exactly (its randomness and the envs' resets are functions of the seeds and env steps).
+
+    python -m experiments.finetune
+    python -m experiments.finetune --env hopper --online-steps 2000 --online-block 500 --online-eval-every 1000 \\
+        --updates 2000 --pretrain-updates 1000 --seeds 2 --max-transitions 20000          # a tiny run
+    python -m experiments.finetune --algo rebrac --replay online-only --warmup-steps 5000   # WSRL's recipe
+"""
+from __future__ import annotations
+
+from offrl_jax.app.command import run_command
+from offrl_jax.app.studies import HPARAM_DESTS, given, make_study, parser, study_variants
+from offrl_jax.online.config import OnlineConfig
+from offrl_jax.run.study import Study
+from offrl_jax.system.cli import UsageError, int_at_least, positive_int
+
+ARMS = {"pretrained": {"pretrain": "actor+critic"}, "scratch": {"pretrain": "none"},
+        "pretrain-only": {"pretrain": "actor+critic"}}  # pretrain-only: pre-training takes the offline budget
+ONLINE_FLAGS = {"online_steps": "steps", "online_block": "block", "utd": "utd", "warmup_steps": "warmup",
+                "buffer_capacity": "capacity", "online_eval_every": "eval_every"}
+
+
+def build(args) -> Study:
+    if args.algo == "bc":
+        raise UsageError("--algo bc: behaviour cloning has no offline-RL phase and no critic to fine-tune online "
+                         "(the pretrain-only arm is imitation, then improvement online)")
+    try:
+        online = OnlineConfig(**{field: getattr(args, flag) for flag, field in ONLINE_FLAGS.items()})
+    except ValueError as e:
+        raise UsageError(str(e)) from None
+    if "pretrain-only" in args.arms and getattr(args, "pretrain_updates", None):
+        raise UsageError("--pretrain-updates: the pretrain-only arm pre-trains for the whole offline budget "
+                         "(--updates); leave it out, or leave that arm out (--arms pretrained scratch)")
+    own = {arm: ARMS[arm] | ({"pretrain_updates": args.updates} if arm == "pretrain-only" else {})
+           for arm in args.arms}
+    variants = tuple(v for arm in args.arms for v in study_variants(arm, args.algo, own[arm], args))
+    return make_study(args.env, args.algo, args.level, args, extra={"online": online}, variants=variants,
+                      reference="scratch" if "scratch" in args.arms else None)
+
+
+def make_parser():
+    p = parser("experiments.finetune", __doc__, updates=40_000, eval_every=2_500, seeds=5, eval_episodes=5,
+               omit=("pretrain",), default_preset="published", online=True)
+    g = p.add_argument_group("online phase")
+    g.add_argument("--arms", nargs="+", choices=tuple(ARMS), default=list(ARMS),
+                   help="the variants to compare (default: all three)")
+    g.add_argument("--online-steps", type=positive_int, default=50_000,
+                   help="env steps per seed after the offline phases (default %(default)s)")
+    g.add_argument("--online-block", type=positive_int, default=1_000,
+                   help="env steps collected between two scans of updates; the online steps, the warm-up and the "
+                        "online evaluation interval are multiples of it (default %(default)s)")
+    g.add_argument("--utd", type=positive_int, default=1,
+                   help="updates per env step (default %(default)s)")
+    g.add_argument("--warmup-steps", type=int_at_least(0), default=0,
+                   help="env steps collected with the hand-over policy before the first online update (WSRL: "
+                        "5000; default %(default)s)")
+    g.add_argument("--buffer-capacity", type=int_at_least(0), default=0,
+                   help="online buffer rows per seed; 0: every online step, nothing overwritten (default)")
+    g.add_argument("--online-eval-every", type=positive_int, default=5_000,
+                   help="env steps between online evaluations (default %(default)s)")
+    return p
+
+
+def main(argv=None) -> int:
+    return run_command(build, make_parser(), argv, hparams=given, hparam_dests=HPARAM_DESTS)
+
+
+if __name__ == "__main__":
+    from offrl_jax.system.cli import run_main
+
+    run_main(main)

@@ -1,0 +1,164 @@
+"""The online phase as a phase of a run: its settings, each family's online values and exploration, the loop on the
+driver's member axis, and `experiments.finetune` end to end (run, resume inside the online phase, refusals)."""
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from flax import serialization
+
+from offrl_jax.algos import make_algorithm, make_config
+from offrl_jax.data.device import device_data
+from offrl_jax.driver import Driver
+from offrl_jax.online.config import OnlineConfig
+from offrl_jax.online.envs import exploration_policy
+from offrl_jax.online.loop import online_phase, run_online
+from offrl_jax.run.results import read_curves
+from tests.entry import run_module
+
+
+@pytest.mark.parametrize("kwargs, fragment", [
+    (dict(steps=1500, block=1000), "multiple of the block"),
+    (dict(steps=2000, block=1000, eval_every=500), "multiple of the block"),
+    (dict(steps=2000, block=1000, warmup=2000), "leaves no step"),
+    (dict(steps=2000, block=1000, utd=0), "positive integer"),
+    (dict(steps=2000, block=1000, capacity=-1), ">= 0"),
+    (dict(steps=True, block=1000), "positive integer"),
+])
+def test_online_config_refuses_inconsistent_settings(kwargs, fragment):
+    with pytest.raises(ValueError, match=fragment):
+        OnlineConfig(**kwargs)
+
+
+def test_online_config_counts_updates_and_sizes_the_buffer():
+    online = OnlineConfig(steps=5000, block=1000, utd=2, warmup=1000)
+    assert online.updates() == 8000  # 2 updates for each of the 4000 steps after the warm-up
+    assert online.rows(horizon=1000) == 5000  # every step kept
+    assert OnlineConfig(steps=1000, block=500).rows(horizon=1000) == 1499  # an episode ending in a block must fit
+    with pytest.raises(ValueError, match="at least 1499"):
+        OnlineConfig(steps=1000, block=500, capacity=1000).rows(horizon=1000)
+
+
+def test_rebrac_online_values_follow_corls_schedule():
+    config = make_config("rebrac", "hopper", hidden=(8, 8), actor_beta=0.4)
+    algo = make_algorithm(config, 3, 2, 10)
+    for progress, factor in ((0.0, 1.0), (0.25, 0.75), (0.5, 0.5), (0.9, 0.5)):  # linear to the floor of 0.5
+        values = algo.online_values(jnp.float32(progress))
+        assert float(values["critic_beta"]) == 0.0
+        np.testing.assert_allclose(float(values["actor_beta"]), 0.4 * factor, rtol=1e-6)
+
+
+def test_the_online_phase_at_an_update_carries_the_schedule(tiny_dataset):
+    config = make_config("rebrac", "hopper", hidden=(8, 8), pretrain="none", actor_beta=0.4)
+    algo = make_algorithm(config, tiny_dataset.obs_dim, tiny_dataset.act_dim, len(tiny_dataset))
+    online = OnlineConfig(steps=1000, block=500)
+    phase, phase_at = online_phase(algo, 200, online)
+    assert (phase.name, phase.steps, phase.updates_per_call) == ("online", 1000, 2)
+    seen = {}
+    original = type(algo).phases
+
+    def spy(self, total):
+        seen["actor_beta"], seen["critic_beta"] = float(self.cfg.actor_beta), float(self.cfg.critic_beta)
+        return original(self, total)
+
+    type(algo).phases = spy
+    try:
+        phase_at(None, jnp.int32(200 + 250))  # a quarter of the online updates done
+    finally:
+        type(algo).phases = original
+    np.testing.assert_allclose(seen["actor_beta"], 0.3, rtol=1e-6)
+    assert seen["critic_beta"] == 0.0
+
+
+def test_bc_alone_cannot_go_online(tiny_dataset):
+    algo = make_algorithm(make_config("bc", "hopper", hidden=(8, 8)), tiny_dataset.obs_dim, tiny_dataset.act_dim, 10)
+    with pytest.raises(ValueError, match="no offline-RL phase"):
+        online_phase(algo, 100, OnlineConfig(steps=1000, block=500))
+
+
+def test_a_stochastic_actor_explores_with_its_sample_a_deterministic_one_with_noise(tiny_dataset):
+    obs_dim, act_dim = tiny_dataset.obs_dim, tiny_dataset.act_dim
+    mean, std = np.zeros(obs_dim, np.float32), np.ones(obs_dim, np.float32)
+    obs, keys = jnp.ones((2, obs_dim)) * 0.3, jax.vmap(jax.random.PRNGKey)(jnp.arange(2))
+    sacn = make_algorithm(make_config("edac", "hopper", hidden=(8, 8), num_critics=2), obs_dim, act_dim, 10)
+    states = jax.vmap(sacn.init)(keys)
+    sampled = exploration_policy(sacn.act, mean, std, 0.0, sacn.explore)(states, keys, obs, 7)
+    expected = jax.vmap(lambda s, k, o: sacn.sample_policy(s.actor.params, o, jax.random.fold_in(k, 7))[0])(
+        states, keys, obs)
+    np.testing.assert_allclose(np.asarray(sampled), np.asarray(expected), rtol=1e-6)
+    iql = make_algorithm(make_config("iql", "hopper", hidden=(8, 8), deterministic=True), obs_dim, act_dim, 10)
+    states = jax.vmap(iql.init)(keys)
+    noisy = exploration_policy(iql.act, mean, std, 0.5, iql.explore)(states, keys, obs, 7)
+    plain = jax.vmap(iql.act)(states, obs)
+    eps = jax.vmap(lambda k: jax.random.normal(jax.random.fold_in(k, 7), (act_dim,)))(keys)
+    np.testing.assert_allclose(np.asarray(noisy), np.clip(np.asarray(plain + 0.5 * eps), -1, 1), rtol=1e-5)
+
+
+def test_the_warm_up_collects_without_updating_then_updates_run(tiny_dataset):
+    config = make_config("td3bc", "hopper", hidden=(16, 16), pretrain="none", target="max_mc")
+    algo = make_algorithm(config, tiny_dataset.obs_dim, tiny_dataset.act_dim, len(tiny_dataset))
+    form = device_data(tiny_dataset, config.gamma)
+    driver = Driver(algo, form.arrays, (0, 1), batch_size=16)
+    handover = list(driver.run(algo.phases(100), 100))[-1]
+    handover.states = jax.device_get(handover.states)  # the next update call takes over the device buffers
+    online = OnlineConfig(steps=600, block=200, warmup=200, eval_every=200)
+    chunks = []
+    for chunk in run_online(driver, algo, online, "hopper", form, handover.states, 100, handover.seconds):
+        chunk.states = jax.device_get(chunk.states)
+        chunks.append(chunk)
+    assert [c.env_steps for c in chunks] == [200, 400, 600]
+    assert [c.update for c in chunks] == [100, 300, 500]  # no update in the warm-up, then 200 per block (utd 1)
+    for a, b in zip(jax.tree.leaves(chunks[0].states), jax.tree.leaves(handover.states)):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    assert any(not np.allclose(a, b) for a, b in zip(jax.tree.leaves(chunks[-1].states),
+                                                     jax.tree.leaves(handover.states)))
+    assert set(chunks[-1].metrics) >= {"critic_loss", "actor_loss", "train_score", "train_episodes", "finite"}
+    assert all(c.metrics["train_episodes"].sum() > 0 for c in chunks)  # an untrained hopper falls: episodes end
+
+
+TINY = ["--env", "hopper", "--updates", "400", "--eval-every", "200", "--seeds", "2", "--max-transitions", "20000",
+        "--online-steps", "600", "--online-block", "300", "--online-eval-every", "300", "--hidden", "16", "16",
+        "--eval-episodes", "1", "--parallel", "1", "--no-progress", "--arms", "pretrained", "scratch",
+        "--pretrain-updates", "200"]
+
+
+def test_finetune_runs_end_to_end_and_a_resume_inside_the_online_phase_recomputes_it(tmp_path):
+    out = tmp_path / "run"
+    done = run_module("experiments.finetune", *TINY, "--out", out)
+    assert done.returncode == 0, done.stderr
+    rows = read_curves(out / "curves.csv")
+    online_rows = [r for r in rows if r["phase"] == "online"]
+    assert {(r["variant"], r["env_steps"]) for r in online_rows} == {(v, s) for v in ("pretrained", "scratch")
+                                                                      for s in (300.0, 600.0)}
+    assert max(r["update"] for r in online_rows) == 400 + 600
+    saved = json.loads((out / "config.json").read_text())
+    assert saved["online"] == {"steps": 600, "block": 300, "utd": 1, "warmup": 0, "capacity": 0, "eval_every": 300}
+    assert saved["sources"]["pretrained"]["replay"] == "default"
+    # as if killed after the first online evaluation: the last checkpoint holds the rows up to env step 300
+    path = out / "checkpoints" / "pretrained.msgpack"
+    payload = serialization.msgpack_restore(path.read_bytes())
+    payload["history"] = json.dumps([r for r in json.loads(payload["history"]) if r.get("env_steps", 0) <= 300])
+    payload["update"] = 700
+    path.write_bytes(serialization.msgpack_serialize(payload))
+    resumed = run_module("experiments.finetune", "--resume", out, "--no-progress", "--parallel", "1")
+    assert resumed.returncode == 0, resumed.stderr
+    assert "starts again from the hand-over" in resumed.stderr
+    again = read_curves(out / "curves.csv")
+    key = lambda r: (r["variant"], r["seed"], r["update"], r.get("env_steps"))  # noqa: E731
+    assert sorted((key(r), r["score"]) for r in again) == sorted((key(r), r["score"]) for r in rows)
+
+
+@pytest.mark.parametrize("args, fragment", [
+    (["--online-steps", "1500", "--online-block", "1000"], "multiple of the block"),
+    (["--online-mix", "1.5"], "online_mix"),
+    (["--utd", "0"], "positive integer"),
+    (["--algo", "bc"], "no offline-RL phase"),
+    (["--pretrain-updates", "100"], "pretrain-only"),
+    (["--replay", "sometimes"], "invalid choice"),
+])
+def test_finetune_refuses_bad_online_settings_in_one_line(tmp_path, args, fragment):
+    result = run_module("experiments.finetune", *args, "--out", tmp_path / "x")
+    assert result.returncode == 2
+    assert fragment in result.stderr and len(result.stderr.strip().splitlines()) == 1, result.stderr
+    assert not (tmp_path / "x").exists()
