@@ -135,6 +135,9 @@ def test_finetune_runs_end_to_end_and_a_resume_inside_the_online_phase_recompute
     saved = json.loads((out / "config.json").read_text())
     assert saved["online"] == {"steps": 600, "block": 300, "utd": 1, "warmup": 0, "capacity": 0, "eval_every": 300}
     assert saved["sources"]["pretrained"]["replay"] == "default"
+    summary = json.loads((out / "summary.json").read_text())
+    assert [len(s["online"]["final"]["per_seed"]) for s in summary] == [2, 2]
+    assert "Online phase (600 env steps per seed" in done.stdout and (out / "online.png").stat().st_size > 0
     # as if killed after the first online evaluation: the last checkpoint holds the rows up to env step 300
     path = out / "checkpoints" / "pretrained.msgpack"
     payload = serialization.msgpack_restore(path.read_bytes())
@@ -162,3 +165,27 @@ def test_finetune_refuses_bad_online_settings_in_one_line(tmp_path, args, fragme
     assert result.returncode == 2
     assert fragment in result.stderr and len(result.stderr.strip().splitlines()) == 1, result.stderr
     assert not (tmp_path / "x").exists()
+
+
+def test_online_measures_by_hand():
+    """Two seeds, an online phase of 1000 env steps evaluated every 100: the hand-over, the dip in the first 10 %,
+    the final score, the gain and the episode-weighted training score, computed by hand."""
+    from offrl_jax.run.online_summary import summarize_online
+
+    rows = [{"variant": "a", "seed": s, "phase": "offline_rl", "update": 50, "score": h}
+            for s, h in ((0, 40.0), (1, 30.0))]
+    for step, (s0, s1), (t0, t1), (e0, e1) in ((100, (35.0, 33.0), (20.0, 10.0), (1, 3)),
+                                               (200, (30.0, 40.0), (30.0, 50.0), (3, 1)),
+                                               (1000, (60.0, 70.0), (40.0, 20.0), (0, 2))):
+        rows += [{"variant": "a", "seed": 0, "phase": "online", "update": 50 + step, "score": s0, "env_steps": step,
+                  "train_score": t0, "train_episodes": e0},
+                 {"variant": "a", "seed": 1, "phase": "online", "update": 50 + step, "score": s1, "env_steps": step,
+                  "train_score": t1, "train_episodes": e1}]
+    (a,) = summarize_online(rows, ["a"], (0, 1), 1000, behaviour=36.0)
+    assert a["handover"]["per_seed"] == [40.0, 30.0]
+    assert a["dip"]["per_seed"] == [-5.0, 3.0]  # only the evaluation at 100 is in the first 10 %
+    assert a["final"]["per_seed"] == [60.0, 70.0] and a["gain"]["per_seed"] == [20.0, 40.0]
+    np.testing.assert_allclose(a["train_score"]["per_seed"], [(20 + 90) / 4, (30 + 50 + 40) / 6])
+    behaviour, best = a["reach"]
+    assert behaviour["env_steps"] == [1000, 200] and behaviour["censored"] == [False, False]
+    assert best["score"] == pytest.approx(0.9 * 65.0) and best["env_steps"] == [1000, 1000]

@@ -41,8 +41,9 @@ from offrl_jax.envs.evaluate import evaluate_normalized, make_policy
 from offrl_jax.online.loop import run_online
 from offrl_jax.run.bc_level import figure_lines
 from offrl_jax.run.loggers import make_logger
+from offrl_jax.run.online_summary import plot_online
 from offrl_jax.run.provenance import fingerprint
-from offrl_jax.run.results import plot_curves, pretrain_ends_of, write_curves
+from offrl_jax.run.results import curves_title, plot_curves, pretrain_ends_of, write_curves
 from offrl_jax.run.resume import check_resume, checkpoint_path, group_identity, kept_updates
 from offrl_jax.run.study import Study, Variant
 from offrl_jax.run.summary import behaviour_score, summarize, summary_json
@@ -136,6 +137,10 @@ def run_study(study: Study, out_dir: Path, dataset: Dataset, resume: bool = Fals
     if writer:
         atomic_write_text(out_dir / "summary.json", summary_json(summary))
         plot_curves(out_dir / "curves.png", study, history, pretrain_ends, figure_lines(summary))
+        if study.online is not None:
+            plot_online(out_dir / "online.png", [v.label for v in study.variants], history, study.seeds,
+                        curves_title(study.name + " online", study.dataset, len(study.seeds)),
+                        behaviour_score(dataset))
     return summary
 
 

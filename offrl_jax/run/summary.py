@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from offrl_jax.run import bc_level, stats
+from offrl_jax.run.online_summary import online_table, summarize_online
 from offrl_jax.run.results import (
     all_nan_expected,
     check_curve_algos,
@@ -73,7 +74,14 @@ def summarize(study: Study, rows: list[dict], pretrain_ends: dict[str, int],
               behaviour: float | None = None) -> list[dict]:
     """One dict per variant (see the module doc); `behaviour` is the dataset's behaviour score, if known."""
     with all_nan_expected():
-        return _summarize(study, rows, pretrain_ends, behaviour)
+        summary = _summarize(study, rows, pretrain_ends, behaviour)
+    if study.online is not None:  # the online phase's own measures (`offrl_jax.run.online_summary`)
+        online = {o["variant"]: o for o in summarize_online(rows, [v.label for v in study.variants], study.seeds,
+                                                            study.online.steps, behaviour)}
+        for entry in summary:
+            if entry["variant"] in online:
+                entry["online"] = online[entry["variant"]]
+    return summary
 
 
 def _summarize(study: Study, rows: list[dict], pretrain_ends: dict[str, int], behaviour: float | None) -> list[dict]:
@@ -278,6 +286,7 @@ def summary_table(summary: list[dict]) -> str:
                       f"{_est(vs['poi_final'], '.2f')}, mean over the run {_est(vs['poi_auc'], '.2f')}. "
                       f"{s['variant']} needs fewer updates than {ref['variant']} to reach "
                       f"{vs['headline'] or 'a threshold'}: {VERDICT_WORDS.get(vs['verdict'], vs['verdict'])}."]
+    lines += online_table([s["online"] for s in summary if s.get("online")])
     return "\n".join(lines)
 
 
