@@ -24,13 +24,19 @@ which recomputes it exactly (its randomness and the envs' resets are functions o
     python -m experiments.finetune --env hopper --online-steps 2000 --online-block 500 --online-eval-every 1000 \\
         --updates 2000 --pretrain-updates 1000 --seeds 2 --max-transitions 20000          # a tiny run
     python -m experiments.finetune --algo rebrac --replay online-only --warmup-steps 5000   # WSRL's recipe
+    python -m experiments.finetune --from runs/mujoco_medium/RUN --variant pretrained      # fine-tune a finished run
 """
 from __future__ import annotations
 
+import dataclasses
+from pathlib import Path
+
+from offrl_jax.algos.config import ONLINE_FIELDS
 from offrl_jax.app.command import run_command
+from offrl_jax.app.outputs import saved_studies
 from offrl_jax.app.studies import HPARAM_DESTS, given, make_study, parser, study_variants
 from offrl_jax.online.config import OnlineConfig
-from offrl_jax.run.study import Study
+from offrl_jax.run.study import Study, reference_label
 from offrl_jax.system.cli import UsageError, int_at_least, positive_int
 
 ARMS = {"pretrained": {"pretrain": "actor+critic"}, "scratch": {"pretrain": "none"},
@@ -40,13 +46,12 @@ ONLINE_FLAGS = {"online_steps": "steps", "online_block": "block", "utd": "utd", 
 
 
 def build(args) -> Study:
+    if args.from_run is not None:
+        return from_run(args, online_config(args))
     if args.algo == "bc":
         raise UsageError("--algo bc: behaviour cloning has no offline-RL phase and no critic to fine-tune online "
                          "(the pretrain-only arm is imitation, then improvement online)")
-    try:
-        online = OnlineConfig(**{field: getattr(args, flag) for flag, field in ONLINE_FLAGS.items()})
-    except ValueError as e:
-        raise UsageError(str(e)) from None
+    online = online_config(args)
     if "pretrain-only" in args.arms and getattr(args, "pretrain_updates", None):
         raise UsageError("--pretrain-updates: the pretrain-only arm pre-trains for the whole offline budget "
                          "(--updates); leave it out, or leave that arm out (--arms pretrained scratch)")
@@ -55,6 +60,47 @@ def build(args) -> Study:
     variants = tuple(v for arm in args.arms for v in study_variants(arm, args.algo, own[arm], args))
     return make_study(args.env, args.algo, args.level, args, extra={"online": online}, variants=variants,
                       reference="scratch" if "scratch" in args.arms else None)
+
+
+def online_config(args) -> OnlineConfig:
+    try:
+        return OnlineConfig(**{field: getattr(args, flag) for flag, field in ONLINE_FLAGS.items()})
+    except ValueError as e:
+        raise UsageError(str(e)) from None
+
+
+FROM_FLAGS = {"from_run", "variant", "out", "overwrite", "parallel", "no_progress", "logger", "dry_run"}
+
+
+def from_run(args, online: OnlineConfig) -> Study:
+    """The online phase of a finished offline run: its study (variants, seeds, data, budget) with `online`, the
+    online fields given, and `start_from` its directory, whose checkpoints the runner starts from."""
+    run = args.from_run
+    typed = set(getattr(args, "typed", ())) - FROM_FLAGS - set(ONLINE_FLAGS) - ONLINE_FIELDS
+    if typed:
+        names = ", ".join(sorted("--" + t.replace("_", "-") for t in typed))
+        raise UsageError(f"--from keeps {run}'s settings, so {names} cannot be given with it (online flags can)")
+    saved = saved_studies(run)
+    if isinstance(saved, list):
+        raise UsageError(f"--from {run}: it holds several studies; give one of its sub-directories")
+    if saved.online is not None:
+        raise UsageError(f"--from {run}: that run has an online phase already (--resume it to finish it)")
+    labels = args.variant or [v.label for v in saved.variants]
+    unknown = sorted(set(labels) - {v.label for v in saved.variants})
+    if unknown:
+        raise UsageError(f"--variant {' '.join(unknown)}: {run} has {', '.join(v.label for v in saved.variants)}")
+    for group, _ in saved.groups():  # a sweep trained as one program has one checkpoint: all of it or none
+        chosen = [v.label for v in group if v.label in labels]
+        if chosen and len(chosen) < len(group):
+            raise UsageError(f"--variant: {', '.join(v.label for v in group)} were trained as one program (one "
+                             "checkpoint); give all of them")
+    values = {k: v for k, v in given(args).items() if k in ONLINE_FIELDS}
+    variants = tuple(dataclasses.replace(v, overrides=tuple(sorted((dict(v.overrides) | values).items())),
+                                         flags=tuple(v.flags or ()) + tuple(values))
+                     for v in saved.variants if v.label in labels)
+    reference = saved.reference if any(reference_label(saved, v.label) in labels for v in variants) else None
+    return dataclasses.replace(saved, variants=variants, online=online, reference=reference,
+                               start_from=str(run.resolve()))
 
 
 def make_parser():
@@ -75,6 +121,11 @@ def make_parser():
                         "5000; default %(default)s)")
     g.add_argument("--buffer-capacity", type=int_at_least(0), default=0,
                    help="online buffer rows per seed; 0: every online step, nothing overwritten (default)")
+    g.add_argument("--from", dest="from_run", type=Path, default=None, metavar="RUN_DIR",
+                   help="fine-tune the variants of this finished offline run (its checkpoints, settings, seeds and "
+                        "data) instead of training them again; only online flags may be given with it")
+    g.add_argument("--variant", nargs="+", default=None,
+                   help="with --from: the variants to fine-tune (default: all)")
     g.add_argument("--online-eval-every", type=positive_int, default=5_000,
                    help="env steps between online evaluations (default %(default)s)")
     return p

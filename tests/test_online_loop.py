@@ -189,3 +189,28 @@ def test_online_measures_by_hand():
     behaviour, best = a["reach"]
     assert behaviour["env_steps"] == [1000, 200] and behaviour["censored"] == [False, False]
     assert best["score"] == pytest.approx(0.9 * 65.0) and best["env_steps"] == [1000, 1000]
+
+
+def test_finetune_from_a_finished_offline_run_starts_at_its_checkpoint(tmp_path):
+    offline = tmp_path / "offline"
+    argv = ["--env", "hopper", "--updates", "400", "--eval-every", "200", "--seeds", "2", "--max-transitions",
+            "20000", "--hidden", "16", "16", "--eval-episodes", "1", "--parallel", "1", "--no-progress",
+            "--pretrain-updates", "200"]
+    assert run_module("experiments.mujoco_medium", *argv, "--out", offline).returncode == 0
+    refused = run_module("experiments.finetune", "--from", offline, "--alpha", "3", "--out", tmp_path / "x")
+    assert refused.returncode == 2 and "--alpha cannot be given" in refused.stderr and not (tmp_path / "x").exists()
+    refused = run_module("experiments.finetune", "--from", offline, "--variant", "nope", "--out", tmp_path / "x")
+    assert refused.returncode == 2 and "--variant nope" in refused.stderr
+    out = tmp_path / "online"
+    done = run_module("experiments.finetune", "--from", offline, "--variant", "pretrained", "--online-steps", "600",
+                      "--online-block", "300", "--online-eval-every", "300", "--replay", "append", "--parallel", "1",
+                      "--no-progress", "--out", out)
+    assert done.returncode == 0, done.stderr
+    before = read_curves(offline / "curves.csv")
+    after = read_curves(out / "curves.csv")
+    first = [(r["seed"], r["update"], r["score"]) for r in before if r["variant"] == "pretrained"]
+    assert [(r["seed"], r["update"], r["score"]) for r in after if r["phase"] != "online"] == first
+    assert {r["env_steps"] for r in after if r["phase"] == "online"} == {300.0, 600.0}
+    saved = json.loads((out / "config.json").read_text())
+    assert saved["start_from"] == str(offline.resolve()) and [v["label"] for v in saved["variants"]] == ["pretrained"]
+    assert saved["resolved"]["pretrained"]["replay"] == "append"

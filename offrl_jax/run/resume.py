@@ -26,9 +26,11 @@ import numpy as np
 from flax import serialization
 
 from offrl_jax.algos import family_of, make_algorithm
+from offrl_jax.algos.config import ONLINE_FIELDS
 from offrl_jax.driver import INIT, seed_keys
 from offrl_jax.run.results import read_curves
 from offrl_jax.run.study import Study, Variant
+from offrl_jax.system.checkpoint import load_checkpoint
 
 
 class ResumeMismatch(ValueError):
@@ -56,14 +58,19 @@ def kept_updates(out_dir: Path, group: tuple[Variant, ...]) -> list[int]:
 
 
 def group_identity(study: Study, group: tuple[Variant, ...], data_sha256: str) -> dict[str, Any]:
-    """What a group's checkpoint depends on (not the budget, which a resume may extend), as JSON-ready data."""
+    """What a group's checkpoint depends on (not the budget, which a resume may extend), as JSON-ready data; the
+    online fields (`ONLINE_FIELDS`) are the online settings' part, so an offline run's checkpoint starts any online
+    phase (`Study.start_from`)."""
     resolved = study.resolved()
-    identity = {"variants": [[v.label, v.algo, [list(o) for o in v.overrides]] for v in group],
-                "resolved": [resolved[v.label] for v in group], "seeds": list(study.seeds),
+    offline = lambda pairs: [list(o) for o in pairs if o[0] not in ONLINE_FIELDS]  # noqa: E731
+    identity = {"variants": [[v.label, v.algo, offline(v.overrides)] for v in group],
+                "resolved": [{k: x for k, x in resolved[v.label].items() if k not in ONLINE_FIELDS} for v in group],
+                "seeds": list(study.seeds),
                 "batch_size": study.batch_size, "env": study.env, "data": data_sha256,
                 "evaluation": {"eval_every": study.eval_every, "eval_episodes": study.eval_episodes}}
     if study.online is not None:  # not its env steps: a budget a resume may extend
-        identity["online"] = {k: v for k, v in dataclasses.asdict(study.online).items() if k != "steps"}
+        identity["online"] = {k: v for k, v in dataclasses.asdict(study.online).items() if k != "steps"} | {
+            "fields": [{k: x for k, x in resolved[v.label].items() if k in ONLINE_FIELDS} for v in group]}
     return json.loads(json.dumps(identity, default=list))  # tuples as lists, as they come back from a file
 
 
@@ -198,3 +205,20 @@ def check_resume(study: Study, out_dir: Path, ds, data_sha256: str) -> None:
     if edited := edited_resolved(study, out_dir / "config.json"):
         raise ResumeMismatch(f"{edited}; an edited config.json is refused: start a new run with --config to change a "
                              "value; nothing was changed")
+
+
+def start_from(study: Study, group: tuple[Variant, ...], data_sha256: str, template: Any, last_update: int):
+    """(states, update, seconds, rows) of `group`'s last checkpoint in the finished run `study.start_from`, checked
+    to be this group on this data with these settings, at the end of its offline phases; ValueError otherwise."""
+    path = checkpoint_path(Path(study.start_from), group)
+    if not path.is_file():
+        raise ValueError(f"{path}: no checkpoint of {' + '.join(v.label for v in group)} to start from")
+    payload = serialization.msgpack_restore(path.read_bytes())
+    differ = checkpoint_differences(payload, study, group, data_sha256)
+    if differ:
+        raise ValueError(f"{path}: made by another run ({'; '.join(differ[:3])})")
+    states, update, seconds, rows = load_checkpoint(path, template)
+    if update != last_update or any(r.get("env_steps") for r in rows):
+        raise ValueError(f"{path}: at update {update}, not at the end of its offline phases ({last_update}): "
+                         f"finish it first (--resume {study.start_from})")
+    return states, update, seconds, rows

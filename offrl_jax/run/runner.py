@@ -44,7 +44,7 @@ from offrl_jax.run.loggers import make_logger
 from offrl_jax.run.online_summary import plot_online
 from offrl_jax.run.provenance import fingerprint
 from offrl_jax.run.results import curves_title, plot_curves, pretrain_ends_of, write_curves
-from offrl_jax.run.resume import check_resume, checkpoint_path, group_identity, kept_updates
+from offrl_jax.run.resume import check_resume, checkpoint_path, group_identity, kept_updates, start_from
 from offrl_jax.run.study import Study, Variant
 from offrl_jax.run.summary import behaviour_score, summarize, summary_json
 from offrl_jax.system import distributed
@@ -236,7 +236,10 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
     ended, last_metrics = {}, None  # self-ended pre-training phases, for a resumed run
     online = study.online
     handover_path = checkpoint_path(out_dir, group, "handover")
-    if resume and ckpt_path.exists():
+    if study.start_from is not None and not (resume and ckpt_path.exists()):  # a finished run's offline phases
+        states, start, seconds, rows = start_from(study, group, data_sha256, driver.init(), last_update)
+        record()
+    elif resume and ckpt_path.exists():
         states, start, seconds, rows = load_checkpoint(ckpt_path, driver.init())
         env_steps = max((r.get("env_steps", 0) for r in rows), default=0)
         if online is not None and 0 < env_steps < online.steps:

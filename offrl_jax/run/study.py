@@ -86,6 +86,9 @@ class Study:
     final_window: tuple[int, int] | None = None  # final score = mean of evaluations in [lo, hi] (Adroit protocol)
     vmap_sweeps: bool = True  # variants differing only in one sweepable value (e.g. alpha) share one program
     online: OnlineConfig | None = None  # after the offline phases, fine-tune online in the env (None: offline only)
+    # a finished run directory whose checkpoints are this study's offline phases: it starts from them (the online
+    # phase of `experiments.finetune --from`)
+    start_from: str | None = None
 
     def __post_init__(self):
         for name in ("variants", "seeds", "final_window"):  # JSON's lists, stored as tuples (hashable, comparable)
@@ -95,6 +98,8 @@ class Study:
             object.__setattr__(self, "online", OnlineConfig(**self.online))
         if self.online is not None and not isinstance(self.online, OnlineConfig):
             raise ValueError(f"Study.online = {self.online!r:.100} must be an OnlineConfig or None")
+        if self.start_from is not None and not (isinstance(self.start_from, str) and self.start_from):
+            raise ValueError(f"Study.start_from = {self.start_from!r} must be a run directory or None")
         for name in ("name", "dataset", "env"):
             if not isinstance(getattr(self, name), str):
                 raise ValueError(f"Study.{name} = {getattr(self, name)!r} must be a string")
