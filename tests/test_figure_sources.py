@@ -24,6 +24,13 @@ def test_every_studys_current_run_is_a_run():
         assert (ROOT / run / "summary.json").is_file() and (ROOT / run / "curves.csv").is_file(), (study, run)
 
 
+def test_every_run_of_the_claims_table_is_a_run():
+    runs = [line.strip() for line in (ROOT / "results" / "claims.sh").read_text().splitlines()
+            if line.strip().startswith("results/")]
+    assert len(runs) > 10
+    assert [r for r in runs if not (ROOT / r / "summary.json").is_file()] == []
+
+
 def copy_of_results(tmp_path: Path) -> tuple[Path, dict, dict]:
     """A root holding results/figures and the runs of figure2.png's first two panels, with their sources."""
     sources = figures.read_json(figures.SOURCES)
