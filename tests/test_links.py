@@ -26,3 +26,26 @@ def test_every_relative_link_resolves():
 def test_the_link_finder_finds_links_and_images_but_not_code():
     page = ROOT / "README.md"
     assert "results/figures/figure2.png" in relative_links(page) and "RESULTS.md" in relative_links(page)
+
+
+def prose_and_cells(page: Path) -> tuple[list[tuple[int, str]], list[tuple[int, str]]]:
+    """(line number, text) of every prose line and of every table cell of a page, code blocks left out."""
+    prose, cells, fence = [], [], False
+    for n, line in enumerate(page.read_text().splitlines(), 1):
+        if line.lstrip().startswith("```"):
+            fence = not fence
+        elif line.startswith("|"):
+            cells += [(n, c) for c in line.strip("|").split("|")]
+        elif not fence and not line.startswith("    "):
+            prose.append((n, line))
+    return prose, cells
+
+
+def test_the_readme_and_results_stay_scannable():
+    """A newcomer reads the README's first screen and RESULTS.md's sections: prose wrapped at 120 characters, table
+    cells short (the README's at most 40 words, RESULTS.md's 60; more is a sentence in docs/ or a study's README)."""
+    for page, lines, words in ((ROOT / "README.md", 160, 40), (ROOT / "RESULTS.md", 420, 60)):
+        prose, cells = prose_and_cells(page)
+        assert len(page.read_text().splitlines()) <= lines, page.name
+        assert [n for n, line in prose if len(line) > 120] == [], page.name
+        assert [n for n, cell in cells if len(cell.split()) > words] == [], page.name
