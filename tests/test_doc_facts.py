@@ -63,6 +63,13 @@ def test_the_core_is_the_size_docs_extending_says():
     assert abs(lines - stated) <= 0.1 * stated, f"the core is {lines:,} lines; docs/extending.md says about {stated:,}"
 
 
+def test_a_study_is_the_size_of_the_example_docs_extending_names():
+    said = re.search(r"see `experiments/ablation.py` \| ~(\d+) lines", (ROOT / "docs" / "extending.md").read_text())
+    assert said, "docs/extending.md no longer states a study's size; drop this test with it"
+    lines = len((ROOT / "experiments" / "ablation.py").read_text().splitlines())
+    assert abs(lines - int(said[1])) <= 0.25 * int(said[1]), f"experiments/ablation.py is {lines} lines"
+
+
 def test_a_list_of_the_families_config_classes_names_every_family():
     configs = {family.config.__name__ for family in FAMILIES.values()}
     for page in PAGES:
