@@ -92,7 +92,7 @@ def redraw(sources_path: Path = SOURCES, studies_path: Path = STUDIES) -> list[P
     for figure, spec in sources.items():
         for panel in spec["panels"]:
             if problem := source_problem(panel, studies):
-                raise ValueError(f"{sources_path.relative_to(ROOT)}: {figure}: {problem}")
+                raise ValueError(f"{sources_path}: {figure}: {problem}")
     written = []
     for figure, spec in sources.items():
         runs, datasets = [ROOT / panel["run"] for panel in spec["panels"]], [p.get("dataset") for p in spec["panels"]]

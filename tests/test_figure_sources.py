@@ -7,6 +7,8 @@ import json
 import shutil
 from pathlib import Path
 
+import pytest
+
 from experiments import figures
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -88,3 +90,27 @@ def test_report_figures_takes_no_run_directories_and_report_needs_some(capsys):
     assert report.main(["results/figure2/hopper-edac", "--figures"]) == 2
     assert report.main([]) == 2
     assert capsys.readouterr().err.strip().splitlines()[-1].startswith("error: give one or more run directories")
+
+
+def test_redraw_draws_each_figure_from_its_runs_and_records_their_curves(tmp_path):
+    panel = {"study": "figure2/hopper-edac", "run": "results/figure2/hopper-edac", "dataset": "hopper-medium-v0"}
+    sources = tmp_path / "sources.json"
+    sources.write_text(json.dumps({"one.png": {"shows": "a test", "drawn_by": "plot_studies", "panels": [panel]}}))
+    studies = tmp_path / "studies.json"
+    studies.write_text(json.dumps({panel["study"]: panel["run"]}))
+    written = figures.redraw(sources, studies)
+    assert written == [tmp_path / "one.png", tmp_path / "one.pdf"]
+    assert (tmp_path / "one.png").read_bytes()[:4] == b"\x89PNG"
+    [drawn] = json.loads(sources.read_text())["one.png"]["panels"]
+    assert drawn["curves_sha256"] == figures.curves_sha256(ROOT / panel["run"])
+
+
+def test_redraw_refuses_a_replaced_source_before_drawing_anything(tmp_path):
+    panel = {"study": "figure2/hopper-edac", "run": "results/figure2/hopper-edac"}
+    sources = tmp_path / "sources.json"
+    sources.write_text(json.dumps({"one.png": {"panels": [panel]}}))
+    studies = tmp_path / "studies.json"
+    studies.write_text(json.dumps({panel["study"]: "results/figure2/hopper-edac-critic9k"}))
+    with pytest.raises(ValueError, match="has been replaced by results/figure2/hopper-edac-critic9k"):
+        figures.redraw(sources, studies)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["sources.json", "studies.json"]
