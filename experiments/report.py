@@ -28,6 +28,9 @@ paper's Figure 2 (rows: environments, columns: algorithms) when each (environmen
 in one panel with `--overlay` (`offrl_jax.run.figures`):
 
     python -m experiments.report results/figure2/*-td3bc results/figure2/*-edac --plot figure2.png
+
+`--figures` redraws every committed figure under results/figures/ from the runs its sources.json names
+(`experiments.figures`).
 """
 from __future__ import annotations
 
@@ -197,7 +200,9 @@ def curve_table(curves: Path) -> str:
 def main(argv=None) -> int:
     p = OneLineParser(prog="experiments.report", description=__doc__,
                       formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("dirs", nargs="+", type=Path, help="run directories (or directories of studies)")
+    p.add_argument("dirs", nargs="*", type=Path, help="run directories (or directories of studies)")
+    p.add_argument("--figures", action="store_true",
+                   help="redraw every figure of results/figures/sources.json from its runs (no directories)")
     p.add_argument("--curves", action="store_true", help="also the seed-mean score at every evaluation")
     p.add_argument("--merge", type=Path, metavar="OUT",
                    help="merge the run directories (one study, different variants) into OUT (a new directory)")
@@ -212,6 +217,16 @@ def main(argv=None) -> int:
                    help="let --plot / --aggregate replace figures that exist (their .png and .pdf)")
     args = p.parse_args(argv)
     try:
+        if args.figures:
+            if args.dirs or args.merge or args.plot or args.aggregate:
+                raise ValueError("--figures draws the runs of results/figures/sources.json; give nothing else")
+            from experiments import figures
+
+            for path in figures.redraw():
+                print(f"figure: {path.relative_to(figures.ROOT)}", file=sys.stderr)
+            return 0
+        if not args.dirs:
+            raise ValueError("give one or more run directories (or --figures)")
         seen = [d.resolve() for d in args.dirs]
         if len(set(seen)) < len(seen):
             twice = next(d for d, r in zip(args.dirs, seen) if seen.count(r) > 1)

@@ -52,10 +52,21 @@ def updates_label(x: float, _=None) -> str:
     return f"{x / 1e3:g}k" if abs(x) >= 1e3 else f"{x:g}"
 
 
+def data_label(dataset: str) -> str:
+    """hopper-medium-v0 -> hopper-medium v0 (a version named in a title); a name without a version as it is."""
+    from offrl_jax.data.dataset import split_version
+
+    name, version = split_version(dataset)
+    return dataset if name == dataset else f"{name} v{version}"
+
+
 def plot_studies(study_dirs: list[Path], path: Path, reference: bool = True, overlay: bool = False,
-                 summaries: list[list[dict]] | None = None) -> list[Path]:
+                 summaries: list[list[dict]] | None = None, datasets: list[str | None] | None = None) -> list[Path]:
     """One panel per study directory (its summary.json, or its summary in `summaries`, and its curves.csv), or all in
-    one (`overlay`), written to `path` as PNG and beside it as PDF; returns the files written."""
+    one (`overlay`), written to `path` as PNG and beside it as PDF; returns the files written.  Each panel's title
+    names its data, algorithm, seeds and budget; `datasets` names a study's data where its summary's name is not
+    enough (a versioned id, e.g. hopper-medium-v0), for the title and for the behaviour line of a run that did not
+    record its behaviour score."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -67,7 +78,9 @@ def plot_studies(study_dirs: list[Path], path: Path, reference: bool = True, ove
     rows, cols = ([""], ["0"]) if overlay else panel_grid(summaries)
     fig, axes = plt.subplots(len(rows), len(cols), figsize=(4.2 * len(cols), 3.2 * len(rows)), squeeze=False)
     used = set()
-    for index, (study_dir, summary) in enumerate(zip(study_dirs, summaries)):
+    datasets = datasets or [None] * len(study_dirs)
+    for index, (study_dir, summary, dataset) in enumerate(zip(study_dirs, summaries, datasets)):
+        dataset = dataset or summary[0]["dataset"]
         env, algo = summary[0]["env"], summary[0]["algo"]
         r, c = (0, 0) if overlay else (rows.index(env), cols.index(algo)) if rows != [""] else (0, index)
         ax = axes[r][c]
@@ -85,15 +98,16 @@ def plot_studies(study_dirs: list[Path], path: Path, reference: bool = True, ove
             ax.fill_between(updates, low, high, color=color, alpha=0.2)
             if entry.get("pretrain_updates"):
                 ax.axvline(entry["pretrain_updates"], color=color, ls=":", lw=1)
-        behaviour = behaviour_score(summary[0]["dataset"]) if reference else None
+        recorded = next((s["behaviour_score"] for s in summary if s.get("behaviour_score") is not None), None)
+        behaviour = (recorded if recorded is not None else behaviour_score(dataset)) if reference else None
         if behaviour is not None:
             ax.axhline(behaviour, color="grey", ls="--", lw=1, label=f"behaviour data ({behaviour:.1f})")
         for score, label in [] if overlay else figure_lines(summary):
             ax.axhline(score, color="black", ls="-.", lw=1, label=label)
         if not overlay:
-            n = len(summary[0]["seeds"])
-            ax.set_title(f"{summary[0]['dataset']}, {ALGO_NAMES.get(algo, algo)} ({n} seed{'s' * (n != 1)})",
-                         fontsize=10)
+            n, budget = len(summary[0]["seeds"]), max(s["updates"] for s in summary)
+            ax.set_title(f"{data_label(dataset)}, {ALGO_NAMES.get(algo, algo)} ({n} seed{'s' * (n != 1)}, "
+                         f"{updates_label(budget)} updates)", fontsize=10)
         ax.xaxis.set_major_formatter(FuncFormatter(updates_label))
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7)

@@ -1,0 +1,78 @@
+"""What the README, RESULTS.md and docs/ say about the code holds: the paths and modules they name exist, the core's
+size is what docs/extending.md says, and every place that lists the algorithm families' config classes lists them
+all."""
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import re
+from pathlib import Path
+
+from offrl_jax.algos import FAMILIES
+
+ROOT = Path(__file__).resolve().parents[1]
+PAGES = [ROOT / "README.md", ROOT / "RESULTS.md", *sorted((ROOT / "docs").glob("*.md"))]
+CODE_SPAN = re.compile(r"`([^`\n]+)`")
+PATH = re.compile(r"^(?:offrl_jax|experiments|tests|benchmarks|docs)/[\w./-]*$")
+MODULE = re.compile(r"^(?:offrl_jax|experiments|benchmarks)(?:\.\w+)+$")
+
+
+def spans(page: Path) -> list[str]:
+    text = re.sub(r"```.*?```", "", page.read_text(), flags=re.DOTALL)  # examples, not statements about the code
+    return [s.split("::")[0].rstrip(".,:;") for s in CODE_SPAN.findall(text)]
+
+
+def test_named_paths_exist():
+    missing = [f"{page.relative_to(ROOT)}: {s}" for page in PAGES for s in spans(page)
+               if PATH.match(s) and "*" not in s and not (ROOT / s).exists()]
+    assert not missing, "\n".join(missing)
+
+
+def resolves(dotted: str) -> bool:
+    """A module, or a module's attribute (one or two levels down: a function, a class, its method)."""
+    parts = dotted.split(".")
+    for cut in range(len(parts), 0, -1):
+        name = ".".join(parts[:cut])
+        try:
+            if importlib.util.find_spec(name) is None:
+                continue
+        except ModuleNotFoundError:
+            continue
+        obj = importlib.import_module(name)
+        for attr in parts[cut:]:
+            if not hasattr(obj, attr):
+                return False
+            obj = getattr(obj, attr)
+        return True
+    return False
+
+
+def test_named_modules_and_functions_exist():
+    missing = [f"{page.relative_to(ROOT)}: {s}" for page in PAGES for s in spans(page)
+               if MODULE.match(s) and not resolves(s)]
+    assert not missing, "\n".join(missing)
+
+
+def test_the_core_is_the_size_docs_extending_says():
+    said = re.search(r"the core \(`offrl_jax/\*\.py` and `offrl_jax/algos/`\) is about ([\d,]+) lines",
+                     (ROOT / "docs" / "extending.md").read_text())
+    assert said, "docs/extending.md no longer states the core's size; drop this test with it"
+    lines = sum(len(p.read_text().splitlines()) for p in [*(ROOT / "offrl_jax").glob("*.py"),
+                                                           *(ROOT / "offrl_jax" / "algos").glob("*.py")])
+    stated = int(said[1].replace(",", ""))
+    assert abs(lines - stated) <= 0.1 * stated, f"the core is {lines:,} lines; docs/extending.md says about {stated:,}"
+
+
+def test_a_study_is_the_size_of_the_example_docs_extending_names():
+    said = re.search(r"see `experiments/ablation.py` \| ~(\d+) lines", (ROOT / "docs" / "extending.md").read_text())
+    assert said, "docs/extending.md no longer states a study's size; drop this test with it"
+    lines = len((ROOT / "experiments" / "ablation.py").read_text().splitlines())
+    assert abs(lines - int(said[1])) <= 0.25 * int(said[1]), f"experiments/ablation.py is {lines} lines"
+
+
+def test_a_list_of_the_families_config_classes_names_every_family():
+    configs = {family.config.__name__ for family in FAMILIES.values()}
+    for page in PAGES:
+        for paragraph in re.split(r"\n\s*\n", page.read_text()):
+            named = configs & set(re.findall(r"`(\w+Config)`", paragraph))
+            assert len(named) < 2 or named == configs, (page.name, sorted(configs - named), paragraph[:120])
