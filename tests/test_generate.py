@@ -163,16 +163,16 @@ def test_default_cache_dir_is_a_minari_id_that_minari_lists(tmp_path, monkeypatc
 
     monkeypatch.setenv("OFFRL_JAX_CACHE", str(tmp_path))
     out = generate("hopper-medium", transitions=1000, progress=False, num_envs=2)
-    assert out == tmp_path / "datasets" / "hopper-medium-v1" == dataset_dir("hopper-medium")  # its current version
+    assert out == tmp_path / "datasets" / "hopper-medium-v2" == dataset_dir("hopper-medium")  # its current version
     monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "datasets"))
-    assert "hopper-medium-v1" in minari.list_local_datasets()
-    assert minari.load_dataset("hopper-medium-v1").total_steps == 1000
+    assert "hopper-medium-v2" in minari.list_local_datasets()
+    assert minari.load_dataset("hopper-medium-v2").total_steps == 1000
     from offrl_jax.data import catalogue
     with pytest.warns(UserWarning, match="generated capped at 1,000 transitions"):  # a full-size run is told
         assert len(catalogue.load("hopper-medium")) == 1000
     monkeypatch.delenv("MINARI_DATASETS_PATH")
     with pytest.warns(UserWarning, match="capped"):  # its Minari id, as Minari writes it, names it too
-        assert catalogue.load("hopper-medium-v1").name == "hopper-medium"
+        assert catalogue.load("hopper-medium-v2").name == "hopper-medium"
     legacy = tmp_path / "datasets" / "walker2d-medium"  # a cache from before the -v0 suffix is moved, not redone
     (legacy / "data").mkdir(parents=True)
     (legacy / "data" / "metadata.json").write_text("{}")
@@ -182,21 +182,24 @@ def test_default_cache_dir_is_a_minari_id_that_minari_lists(tmp_path, monkeypatc
 
 @needs_medium
 def test_an_earlier_version_stays_loadable_by_its_own_name(tmp_path, monkeypatch):
-    """hopper-medium is at version 1; version 0 (the policy behind the runs made before it) is made and cached
-    under its own name, from its own shipped policy, and medium-expert follows the medium version it names."""
+    """hopper-medium is at version 2; versions 0 and 1 (the policies behind the runs made before it) are made and
+    cached under their own names, from their own shipped policies, and medium-expert follows the medium version it
+    names."""
     from offrl_jax.data import catalogue
     from offrl_jax.data.dataset import DATASET_VERSIONS, dataset_dir, split_version
     from offrl_jax.data.generate import build, policy_name
 
-    assert DATASET_VERSIONS["hopper-medium"] == 1
-    assert split_version("hopper-medium") == ("hopper-medium", 1)
+    assert DATASET_VERSIONS["hopper-medium"] == 2
+    assert split_version("hopper-medium") == ("hopper-medium", 2)
     assert split_version("hopper-medium-v0") == ("hopper-medium", 0)
     assert split_version("hopper-medium-replay") == ("hopper-medium-replay", 0)
     assert policy_name("hopper", "medium", 0) == "hopper-medium-v0"
-    assert policy_name("hopper", "medium", 1) == policy_name("hopper", "medium") == "hopper-medium"
+    assert policy_name("hopper", "medium", 1) == "hopper-medium-v1"
+    assert policy_name("hopper", "medium", 2) == policy_name("hopper", "medium") == "hopper-medium"
     assert policy_name("walker2d", "medium", 0) == "walker2d-medium"
     policies = shipped_policies()
-    assert policies["hopper-medium-v0"]["sac_step"] == 210_000 and policies["hopper-medium"]["sac_step"] == 170_000
+    assert policies["hopper-medium-v0"]["sac_step"] == 210_000 and policies["hopper-medium-v1"]["sac_step"] == 170_000
+    assert (policies["hopper-medium"]["sac_seed"], policies["hopper-medium"]["sac_step"]) == (2, 120_000)
     monkeypatch.setenv("OFFRL_JAX_CACHE", str(tmp_path))
     assert dataset_dir("hopper-medium-v0").name == "hopper-medium-v0" != dataset_dir("hopper-medium").name
     old, src_old = build("hopper-medium-v0", transitions=300, progress=False, num_envs=2)
@@ -206,7 +209,7 @@ def test_an_earlier_version_stays_loadable_by_its_own_name(tmp_path, monkeypatch
     assert old.name == "hopper-medium-v0" and not np.array_equal(old.actions, new.actions)
     both, _ = build("hopper-medium-expert-v0", transitions=600, progress=False, num_envs=2)
     np.testing.assert_array_equal(both.observations[:300], old.observations)
-    assert "hopper-medium-v0" in catalogue.KNOWN and "hopper-medium-expert-v0" in catalogue.KNOWN
+    assert {"hopper-medium-v0", "hopper-medium-v1", "hopper-medium-expert-v1"} <= set(catalogue.KNOWN)
     with pytest.raises(catalogue.DatasetError, match="unknown dataset name"):
         catalogue.load("hopper-medium-v7", generate_if_missing=False)
 

@@ -95,7 +95,7 @@ def normalize_obs(obs: np.ndarray, mean: np.ndarray, std: np.ndarray) -> np.ndar
 
 # Generated datasets whose making changed, with their current version (every other generated dataset is at 0).  An
 # earlier version stays loadable by its Minari id, "<name>-v<N>" (docs/datasets.md, "Versions").
-DATASET_VERSIONS: dict[str, int] = {"hopper-medium": 1, "hopper-medium-expert": 1}
+DATASET_VERSIONS: dict[str, int] = {"hopper-medium": 2, "hopper-medium-expert": 2}
 _VERSION = re.compile(r"^(?P<base>.+)-v(?P<version>\d+)$")
 
 
@@ -118,7 +118,7 @@ def dataset_dir(name: str) -> Path:
     version unless `name` names one ("hopper-medium-v0").
 
     The `-v<N>` suffix is Minari's id convention, so `MINARI_DATASETS_PATH=<cache>/datasets minari list local` and
-    `minari.load_dataset("hopper-medium-v1")` see our datasets.  A directory from before the suffix is renamed.
+    `minari.load_dataset("hopper-medium-v2")` see our datasets.  A directory from before the suffix is renamed.
     """
     root = cache_dir() / "datasets"
     base, version = split_version(name)

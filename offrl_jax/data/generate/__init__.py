@@ -149,7 +149,7 @@ def build(name: str, transitions: int | None = None, seed: int = 0, progress: bo
 
 def write_minari(ds: Dataset, out_dir: Path, info: dict[str, Any], overwrite: bool = False) -> Path:
     """Write `ds` with `minari.create_dataset_from_buffers` into exactly `out_dir` (dataset id `<name>-v<version>`,
-    `split_version`: "hopper-medium" is "hopper-medium-v1", "hopper-medium-v0" stays itself).
+    `split_version`: "hopper-medium" is "hopper-medium-v2", "hopper-medium-v0" stays itself).
 
     Minari writes to $MINARI_DATASETS_PATH/<dataset_id>; we point that at a scratch folder next to `out_dir` and
     rename the result to `out_dir`, so any directory name works.
