@@ -7,7 +7,8 @@ mean of the evaluations between 200k and 300k updates (both ends included: 11 ev
 of pre-training), over 4 seeds (mean +- std).  `--scale` shrinks every update count by the same factor for a CPU
 (default 0.1: 30k updates, 20k pre-training, window 20k-30k, evaluation every 1k); `--scale 1` is the paper's
 protocol.  EDAC(+BC) uses the paper's 50 critics and eta 200 unless told otherwise.  TD3+BC's alpha is the
-paper's 0.1 (Table 3) under any preset; the authors' door config has 1.0 (`--alpha 1`).
+paper's 0.1 (Table 3), also with `--preset authors`; `--preset published` gives TD3+BC's published 2.5, and the
+authors' door config has 1.0 (`--alpha 1`).
 
     python -m experiments.adroit_door [--dataset door-human] [--variants BC "pre-trained TD3+BC+CQL"] [--scale 1]
         [--seeds 4]
@@ -69,7 +70,8 @@ def make_parser() -> argparse.ArgumentParser:
                    help="fraction of the paper's update counts, in (0, 10] (default 0.1)")
     p.add_argument("--num-critics", type=positive_int, default=None, help="EDAC(+BC) ensemble size (paper: 50)")
     p.add_argument("--alpha", type=number(0), default=None,
-                   help="TD3+BC(+CQL) alpha (default: the paper's 0.1; the authors' door config: 1.0)")
+                   help="TD3+BC(+CQL) alpha (default: the paper's 0.1, or 2.5 with --preset published; the authors' "
+                        "door config: 1.0)")
     p.add_argument("--balance", choices=BALANCES, default=None,
                    help="the hybrids' loss balancing: x/sg|x| (abs, default) or the authors' x/sg(x) (signed)")
     p.add_argument("--preset", choices=tuple(PRESETS), default=None,
