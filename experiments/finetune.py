@@ -1,13 +1,16 @@
 """First imitate, then improve -- online: the offline phases of a family as the main job runs them, then an online
 phase of --online-steps env steps per seed in the same run, on the same member axis (`offrl_jax.online.loop`).
 
-Arms (--arms; each a variant, all with the same budgets, so the same offline updates and the same env steps):
+Arms (--arms; each a variant, all with the same env steps and, but for online-rl, the same offline updates):
   pretrained      BC + MC critic pre-training, then offline RL, then online (the paper's method, continued)
   scratch         offline RL from scratch, then online
   pretrain-only   pre-training for the whole offline budget, no offline RL, then online (imitate, then improve in
                   the environment)
+  online-rl       no offline phase: online RL from its initialisation with the dataset in its replay, the family
+                  without its behaviour terms (TD3+BC's BC weight 0, ReBRAC's penalties 0; RLPD's recipe without
+                  its ensemble): whether the offline phases were worth it
 
-Default (no arguments): hopper-medium, TD3+BC (alpha 2.5, as the main job), the three arms, 5 seeds, 40k offline
+Default (no arguments): hopper-medium, TD3+BC (alpha 2.5, as the main job), the four arms, 5 seeds, 40k offline
 updates (10k of them pre-training), then 50k online env steps: blocks of 1,000 env steps, each followed by 1,000
 updates (utd 1), evaluation every 2.5k updates offline and every 5k env steps online.  curves.csv has an env_steps
 column for the online rows and the training episodes' mean score (train_score).
@@ -40,7 +43,13 @@ from offrl_jax.run.study import Study, reference_label
 from offrl_jax.system.cli import UsageError, int_at_least, positive_int
 
 ARMS = {"pretrained": {"pretrain": "actor+critic"}, "scratch": {"pretrain": "none"},
-        "pretrain-only": {"pretrain": "actor+critic"}}  # pretrain-only: pre-training takes the offline budget
+        "pretrain-only": {"pretrain": "actor+critic"},  # pre-training takes the offline budget
+        "online-rl": {"pretrain": "none", "offline_updates": 0}}  # no offline phase; the family without its
+# behaviour terms (RLPD's recipe without its ensemble: online RL with the data in its replay); families that have no
+# such form (IQL's actor is a weighted regression on the data) have no online-rl arm
+WITHOUT_BEHAVIOUR = {"td3bc": {"bc_weight": 0.0}, "td3bc_cql": {"bc_weight": 0.0, "cql_weight": 0.0},
+                     "rebrac": {"actor_beta": 0.0, "critic_beta": 0.0}, "edac": {}, "sacn": {},
+                     "edac_bc": {"bc_weight": 0.0}}
 ONLINE_FLAGS = {"online_steps": "steps", "online_block": "block", "utd": "utd", "warmup_steps": "warmup",
                 "buffer_capacity": "capacity", "online_eval_every": "eval_every"}
 
@@ -52,11 +61,16 @@ def build(args) -> Study:
         raise UsageError("--algo bc: behaviour cloning has no offline-RL phase and no critic to fine-tune online "
                          "(the pretrain-only arm is imitation, then improvement online)")
     online = online_config(args)
+    if args.arms is None:
+        args.arms = [arm for arm in ARMS if arm != "online-rl" or args.algo in WITHOUT_BEHAVIOUR]
     if "pretrain-only" in args.arms and getattr(args, "pretrain_updates", None):
         raise UsageError("--pretrain-updates: the pretrain-only arm pre-trains for the whole offline budget "
                          "(--updates); leave it out, or leave that arm out (--arms pretrained scratch)")
+    if "online-rl" in args.arms and args.algo not in WITHOUT_BEHAVIOUR:
+        raise UsageError(f"--arms online-rl: {args.algo} has no form without its behaviour terms (online-rl runs "
+                         f"with --algo {', '.join(WITHOUT_BEHAVIOUR)}); leave that arm out")
     own = {arm: ARMS[arm] | ({"pretrain_updates": args.updates} if arm == "pretrain-only" else {})
-           for arm in args.arms}
+           | (WITHOUT_BEHAVIOUR[args.algo] if arm == "online-rl" else {}) for arm in args.arms}
     variants = tuple(v for arm in args.arms for v in study_variants(arm, args.algo, own[arm], args))
     return make_study(args.env, args.algo, args.level, args, extra={"online": online}, variants=variants,
                       reference="scratch" if "scratch" in args.arms else None)
@@ -107,8 +121,9 @@ def make_parser():
     p = parser("experiments.finetune", __doc__, updates=40_000, eval_every=2_500, seeds=5, eval_episodes=5,
                omit=("pretrain",), default_preset="published", online=True)
     g = p.add_argument_group("online phase")
-    g.add_argument("--arms", nargs="+", choices=tuple(ARMS), default=list(ARMS),
-                   help="the variants to compare (default: all three)")
+    g.add_argument("--arms", nargs="+", choices=tuple(ARMS), default=None,
+                   help="the variants to compare (default: all four, or the first three for a family without an "
+                        "online-rl form)")
     g.add_argument("--online-steps", type=positive_int, default=50_000,
                    help="env steps per seed after the offline phases (default %(default)s)")
     g.add_argument("--online-block", type=positive_int, default=1_000,

@@ -178,15 +178,15 @@ def expectile_loss(diff: jax.Array, expectile: float) -> jax.Array:
 
 
 def td3bc_actor_loss(q: jax.Array, pred_actions: jax.Array, actions: jax.Array, alpha: float,
-                     q_scale_eps: float = 1e-8) -> jax.Array:
-    """TD3+BC actor: -lmbda mean Q(s, pi(s)) + MSE(pi(s), a), lmbda = alpha / (sg(mean |Q|) + q_scale_eps).
+                     q_scale_eps: float = 1e-8, bc_weight: float = 1.0) -> jax.Array:
+    """TD3+BC actor: -lmbda mean Q(s, pi(s)) + bc_weight MSE(pi(s), a), lmbda = alpha / (sg(mean |Q|) + q_scale_eps).
 
     q: (B,) (the first critic's value of the policy action), pred_actions, actions: (B, A) -> ().  CORL and the
-    authors divide by mean|Q| alone (q_scale_eps = 0).
+    authors divide by mean|Q| alone (q_scale_eps = 0); bc_weight 0 is TD3's actor (with Q normalised).
     """
     assert_shapes(q=(q, "B"), pred_actions=(pred_actions, "BA"), actions=(actions, "BA"))
     lmbda = alpha / (sg(jnp.mean(jnp.abs(q))) + q_scale_eps)
-    return -lmbda * jnp.mean(q) + bc_loss(pred_actions, actions)
+    return -lmbda * jnp.mean(q) + bc_weight * bc_loss(pred_actions, actions)
 
 
 def rebrac_actor_loss(q: jax.Array, pred_actions: jax.Array, actions: jax.Array, beta: float,

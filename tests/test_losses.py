@@ -107,6 +107,11 @@ def test_td3bc_actor_loss():
     # lmbda is a constant: d loss / d q = -lmbda / B = -(2.5/3)/2
     grad = jax.grad(lambda q: L.td3bc_actor_loss(q, jnp.zeros((2, 1)), jnp.zeros((2, 1)), 2.5))(jnp.array([2.0, 4.0]))
     A(grad, [-2.5 / 6, -2.5 / 6], rtol=1e-6)
+    # bc_weight scales the MSE alone: 0.5 x 0.5 = 0.25 -> -2.25; 0 leaves TD3's -lmbda mean Q = -2.5
+    A(L.td3bc_actor_loss(jnp.array([2.0, 4.0]), jnp.zeros((2, 1)), jnp.array([[1.0], [0.0]]), 2.5, bc_weight=0.5),
+      -2.25, rtol=1e-6)
+    A(L.td3bc_actor_loss(jnp.array([2.0, 4.0]), jnp.zeros((2, 1)), jnp.array([[1.0], [0.0]]), 2.5, bc_weight=0.0),
+      -2.5, rtol=1e-6)
 
 
 def test_sac_actor_and_temperature_losses():

@@ -159,6 +159,7 @@ def test_finetune_runs_end_to_end_and_a_resume_inside_the_online_phase_recompute
     (["--algo", "bc"], "no offline-RL phase"),
     (["--pretrain-updates", "100"], "pretrain-only"),
     (["--replay", "sometimes"], "invalid choice"),
+    (["--algo", "iql", "--arms", "online-rl"], "no form without its behaviour terms"),
 ])
 def test_finetune_refuses_bad_online_settings_in_one_line(tmp_path, args, fragment):
     result = run_module("experiments.finetune", *args, "--out", tmp_path / "x")
@@ -214,3 +215,16 @@ def test_finetune_from_a_finished_offline_run_starts_at_its_checkpoint(tmp_path)
     saved = json.loads((out / "config.json").read_text())
     assert saved["start_from"] == str(offline.resolve()) and [v["label"] for v in saved["variants"]] == ["pretrained"]
     assert saved["resolved"]["pretrained"]["replay"] == "append"
+
+
+def test_the_online_rl_arm_has_no_offline_phase_and_no_behaviour_term(tmp_path):
+    out = tmp_path / "run"
+    argv = TINY[:TINY.index("--arms")]  # the tiny run's flags before its arms and pre-training
+    done = run_module("experiments.finetune", *argv, "--arms", "online-rl", "--seeds", "1", "--out", out)
+    assert done.returncode == 0, done.stderr
+    rows = read_curves(out / "curves.csv")
+    assert [(r["phase"], r["update"], r.get("env_steps")) for r in rows] == [
+        ("offline_rl", 0, None), ("online", 300, 300.0), ("online", 600, 600.0)]  # the initial policy, then online
+    resolved = json.loads((out / "config.json").read_text())["resolved"]["online-rl"]
+    assert (resolved["offline_updates"], resolved["bc_weight"], resolved["pretrain"]) == (0, 0.0, "none")
+    assert (out / "checkpoints" / "online-rl.handover.msgpack").is_file()

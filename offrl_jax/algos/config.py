@@ -57,6 +57,9 @@ class Config:
     # mean over a window of updates improved by less than tol, relative, for every member), pretrain_updates is then
     # the cap; the updates left go to offline RL
     pretrain_auto: bool = False
+    # this variant's offline updates (pre-training included) in place of the study's budget; None: the study's
+    # (the fine-tuning study's online-rl arm: 0, no offline phase)
+    offline_updates: int | None = None
     pretrain_auto_window: int = 1_000  # must divide the evaluation interval
     pretrain_auto_tol: float = 0.01
     lam: float = 0.0  # TD weight in critic pre-training (0 = pure MC; the paper: 0 or 0.1)
@@ -84,6 +87,7 @@ class Config:
             ("actor_lr", self.actor_lr > 0, "must be positive"),
             ("critic_lr", self.critic_lr > 0, "must be positive"),
             ("pretrain_updates", self.pretrain_updates >= 0, "must be >= 0"),
+            ("offline_updates", self.offline_updates is None or self.offline_updates >= 0, "must be >= 0 or None"),
             ("pretrain_auto_window", self.pretrain_auto_window > 0, "must be positive"),
             ("pretrain_auto_tol", self.pretrain_auto_tol >= 0, "must be >= 0"),
             ("hidden", widths(self.hidden), "must be positive layer widths"),
@@ -100,6 +104,10 @@ class Config:
     def auto_stop(self, monitor: tuple[str, ...]) -> AutoStop | None:
         """The stopping rule of a pre-training phase that watches `monitor`, or None when it is fixed-length."""
         return AutoStop(monitor, self.pretrain_auto_window, self.pretrain_auto_tol) if self.pretrain_auto else None
+
+    def budget(self, study_updates: int) -> int:
+        """The offline updates this variant makes: `offline_updates`, or the study's."""
+        return study_updates if self.offline_updates is None else self.offline_updates
 
     def schedule(self, total_updates: int) -> list[Stage]:
         """The phases of a run of `total_updates` updates, as plans (no networks needed): pre-training, when there is

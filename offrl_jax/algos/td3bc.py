@@ -48,6 +48,7 @@ class TD3BCConfig(Config):
     noise_clip: float = 0.5  # clip of the target policy smoothing noise
     policy_delay: int = 2  # critic updates per actor and target update (TD3)
     q_scale_eps: float = 1e-8  # lmbda = alpha / (mean|Q| + q_scale_eps); CORL and the authors: 0
+    bc_weight: float = 1.0  # weight of the actor's BC term (0: TD3's actor, online RL without a behaviour term)
     # TD3+BC+CQL: critic loss = TD/sg|TD| + cql_weight * CQL/sg|CQL| (0 = off)
     cql_weight: float = 0.0
     balance: str = "abs"  # the hybrid's normalisation: x / sg|x| (abs) or the authors' x / sg(x) (signed)
@@ -60,7 +61,7 @@ class TD3BCConfig(Config):
     bc_target_updates: bool = True
 
     # vmappable (see with_hparams)
-    SWEEPABLE: ClassVar[tuple[str, ...]] = ("alpha", "tau", "policy_noise", "noise_clip")
+    SWEEPABLE: ClassVar[tuple[str, ...]] = ("alpha", "tau", "policy_noise", "noise_clip", "bc_weight")
 
     def __post_init__(self):
         super().__post_init__()
@@ -78,6 +79,7 @@ class TD3BCConfig(Config):
             ("policy_noise", self.policy_noise >= 0, "must be >= 0"),
             ("noise_clip", self.noise_clip >= 0, "must be >= 0"),
             ("cql_weight", self.cql_weight >= 0, "must be >= 0 (0 = off)"),
+            ("bc_weight", self.bc_weight >= 0, "must be >= 0"),
         ])
         if self.bc_only and (self.pretrain != "actor" or self.pretrain_auto):
             what = f"pretrain = {self.pretrain!r}" if self.pretrain != "actor" else "pretrain_auto = True"
@@ -169,7 +171,7 @@ class TD3BC:
         # so the actor's gradient runs through one critic, not all of them
         critic, first = self.critic.member(state.critic.params, 0)
         q = critic.apply(first, batch["observations"], pi)
-        loss = L.td3bc_actor_loss(q, pi, batch["actions"], self.cfg.alpha, self.cfg.q_scale_eps)
+        loss = L.td3bc_actor_loss(q, pi, batch["actions"], self.cfg.alpha, self.cfg.q_scale_eps, self.cfg.bc_weight)
         return loss, {"actor_loss": loss, "bc_mse": L.bc_loss(pi, batch["actions"])}
 
     # --------------------------------------------------------------------------------------- update functions

@@ -39,7 +39,7 @@ from offrl_jax.system.cli import int_at_least, integer, number, positive_int, se
 
 CONFIGS = tuple(family.config for family in FAMILIES.values())
 # fields a study sets through its own flags or its algorithm choice, never one-by-one
-NOT_FLAGS = frozenset({"pretrain", "pretrain_updates", "pretrain_auto", "bc_only"})
+NOT_FLAGS = frozenset({"pretrain", "pretrain_updates", "pretrain_auto", "bc_only", "offline_updates"})
 # the fields that have a flag (`add_config_flags` leaves out a study's `omit` too)
 FLAG_FIELDS = frozenset(f.name for cls in CONFIGS for f in dataclasses.fields(cls)) - NOT_FLAGS
 # the accepted values of the str fields, the same tuples their configs' __post_init__ checks use

@@ -36,7 +36,7 @@ from tqdm.auto import tqdm
 from offrl_jax.algos import make_algorithm
 from offrl_jax.data.dataset import Dataset
 from offrl_jax.data.device import DeviceData, DeviceForms, device_data
-from offrl_jax.driver import Driver
+from offrl_jax.driver import Chunk, Driver
 from offrl_jax.envs.evaluate import evaluate_normalized, make_policy
 from offrl_jax.online.loop import run_online
 from offrl_jax.run.bc_level import figure_lines
@@ -94,7 +94,8 @@ def run_study(study: Study, out_dir: Path, dataset: Dataset, resume: bool = Fals
     if writer:
         atomic_write_text(config_path, record)
     online_updates = study.online.updates() if study.online else 0
-    bar = _Progress(len(study.variants) * (study.updates + online_updates), progress, quiet=not writer)
+    offline = sum(study.config(v.label).budget(study.updates) for v in study.variants)
+    bar = _Progress(offline + len(study.variants) * online_updates, progress, quiet=not writer)
     recorder = _Recorder(out_dir / "curves.csv" if writer else None, [v.label for v in study.variants],
                          logger if writer else None)
     pretrain_ends: dict[str, int] = {}
@@ -218,7 +219,7 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
     sweep = (swept, tuple(float(dict(v.overrides)[swept]) for v in group)) if swept else None
     driver = Driver(algo, data.arrays, seeds, study.batch_size, sweep=sweep)
     policy = make_policy(algo.act, data.obs_mean, data.obs_std)
-    phases = algo.phases(study.updates)
+    phases = algo.phases(config.budget(study.updates))
     pretrain_end = sum(p.steps for p in phases if p.name != "offline_rl")
     last_update = sum(p.steps for p in phases)  # TD3 trims an odd budget to its 2-update call grid
     name = " + ".join(labels)
@@ -276,6 +277,9 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
     handover = {"states": states, "seconds": seconds}  # the offline phases' last states, where online starts
 
     def chunks():
+        if last_update == 0 and not rows:  # no offline phase (an online-only arm): evaluate the initial policy
+            handover.update(states=driver.init(), seconds=0.0)
+            yield Chunk("offline_rl", 0, handover["states"], {"finite": np.ones(len(member_names), bool)}, 0.0, 0.0)
         for chunk in driver.run(phases, study.eval_every, states, start, seconds, ended, last_metrics, on_slice):
             handover.update(states=chunk.states, seconds=chunk.seconds)
             yield chunk

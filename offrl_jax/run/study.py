@@ -145,7 +145,7 @@ class Study:
         resolved = {v.label: v.resolve(self.env, self.dataset) for v in self.variants}
         configs = {label: r.config for label, r in resolved.items()}
         for label, config in configs.items():
-            stages = config.schedule(self.updates)
+            stages = config.schedule(config.budget(self.updates))
             check_call_grid(stages, self.eval_every)
             if self.online is not None:
                 self.online.check(label, stages[-1])
