@@ -14,15 +14,21 @@ and S real hopper environments, back to back:
     offline   N / K - 1 more timed chunks: the offline rate is that of all timed chunks, before and after
 
 At utd 1 one env step of a member is one update of that member, so the goal reads online_env_steps_per_s >= 70 % of
-offline_updates_per_s (both summed over the S members).  The split, in microseconds per env step of all S members:
+offline_updates_per_s (both summed over the S members).  The split, in microseconds per env step of one member (at
+utd 1: per update; a cost paid once per step for all members, as the policy call, is divided by S):
 
-    env_step     MuJoCo: the gymnasium env's `step` (S calls)        env_reset   its `reset`, when an episode ended
+    env_step     MuJoCo: the gymnasium env's `step`                  env_reset   its `reset`, when an episode ended
     policy       the jitted action call for all members (dispatch, S observations in, S actions out)
     bookkeeping  the rest of `MemberEnvs.step` (checks, copies, episode returns)
     stack        the rest of `collect` (its loop, stacking the block)
     insert       `device_rows` and the buffer `insert` (waited for)
     update       the scan of K updates per member (waited for)
     other        the rest of a block: placing the rows, the metrics to the host, the yield
+
+Also: `policy_probe`, microseconds per policy call in a loop of calls alone: as `run_online` calls it (every leaf of
+the agent state passed), given only the actor's parameters, and a trivial jitted function of the observations (the
+floor); `compiles_in_timed_blocks`, XLA compilations after the first block of each online pass (0: nothing is
+recompiled per block).
 """
 from __future__ import annotations
 
@@ -48,6 +54,7 @@ from offrl_jax.driver import Driver
 from offrl_jax.envs.registry import make_env
 from offrl_jax.online import loop
 from offrl_jax.online.config import OnlineConfig
+from offrl_jax.online.envs import exploration_keys, exploration_policy
 from offrl_jax.system.cli import OneLineParser, positive_int
 
 ENV = "hopper"
@@ -155,8 +162,40 @@ def online_blocks(driver: Driver, algo, form, states, online: OnlineConfig, offl
     return jax.device_get(last.states), blocks
 
 
+def policy_probe(driver: Driver, algo, form, states, calls: int = 300, rounds: int = 3) -> dict[str, Any]:
+    """Microseconds per call, the median of `rounds` alternated runs of `calls`: the online policy as `run_online`
+    calls it (every leaf of the agent state passed), the same given only the actor's parameters (None where the
+    family's policy reads more), and a trivial jitted function of the observations (the floor: dispatch, S
+    observations in and S actions out)."""
+    members = len(driver.members)
+    explore = exploration_policy(algo.act, form.obs_mean, form.obs_std, algo.cfg.explore_noise,
+                                 getattr(algo, "explore", None))
+    keys, obs = exploration_keys(driver.members), np.zeros((members, OBS_DIM), np.float32)
+    placed = driver.layout.place(states)
+    actor = placed.replace(**{f.name: None for f in dataclasses.fields(placed) if f.name != "actor"},
+                           actor=placed.actor.replace(opt_state=None, target=None))
+    floor = jax.jit(lambda o: o[:, :ACT_DIM])
+    calls_of = {"policy_us": lambda t: explore(placed, keys, obs, t),
+                "policy_actor_only_us": lambda t: explore(actor, keys, obs, t), "floor_us": lambda t: floor(obs)}
+    try:
+        np.testing.assert_array_equal(np.asarray(explore(actor, keys, obs, 0)), np.asarray(explore(placed, keys, obs, 0)))
+    except (AttributeError, TypeError, AssertionError):  # the family's policy reads more than the actor's parameters
+        del calls_of["policy_actor_only_us"]
+    times = {k: [] for k in calls_of}
+    for _ in range(rounds):
+        for k, call in calls_of.items():
+            np.asarray(call(0))
+            tic = time.perf_counter()
+            for t in range(calls):
+                np.asarray(call(t))
+            times[k].append(1e6 * (time.perf_counter() - tic) / calls)
+    return {k: round(float(np.median(times[k])), 1) if k in times else None for k in
+            ("policy_us", "policy_actor_only_us", "floor_us")} | {"state_leaves": len(jax.tree.leaves(placed))}
+
+
 def split(blocks: list[dict[str, float]], steps: int) -> dict[str, float]:
-    """Microseconds per env step (of all members) of every piece, summed over `blocks`."""
+    """Microseconds per env step of one member of every piece, summed over `blocks` (`steps`: env steps of all
+    members in them)."""
     total = {k: sum(b[k] for b in blocks) for k in blocks[0]}
     us = {"env_step": total["env_step"], "env_reset": total["env_reset"], "policy": total["policy"],
           "bookkeeping": total["member_step"] - total["env_step"] - total["env_reset"],
@@ -181,6 +220,7 @@ def run_case(name: str, seeds: int, dataset, block: int, steps: int) -> dict[str
     with shims(driver, timers):
         states, shimmed = online_blocks(driver, algo, form, states, online, done, make, timers)
     states, after = offline_chunks(driver, algo, states, block, chunks)
+    probe = policy_probe(driver, algo, form, states)
     offline_s = before[1:] + after
     timed_steps = seeds * block * chunks
     offline = seeds * block * len(offline_s) / sum(offline_s)
@@ -200,6 +240,7 @@ def run_case(name: str, seeds: int, dataset, block: int, steps: int) -> dict[str
         "split_pct": {k: round(100 * v / total_us, 1) for k, v in us.items()},
         "host_us_per_step": round(total_us - us["update"], 1),
         "episodes_per_1000_steps": round(1000 * sum(b["episodes"] for b in plain[1:]) / timed_steps, 2),
+        "policy_probe": probe,
         "compile_block_s": round(plain[0]["seconds"], 2),
         "compiles_in_timed_blocks": plain[-1]["compiles"] - plain[0]["compiles"] + shimmed[-1]["compiles"]
         - shimmed[0]["compiles"],
@@ -215,7 +256,7 @@ def format_row(r: dict[str, Any]) -> str:
 
 
 HEADER = (f"{'algo':<8} {'S':>2} {'offl/s':>9} {'steps/s':>9} {'%offl':>6} "
-          + " ".join(f"{k[:8]:>8}" for k in PIECES) + f" {'load':>5}     (split: us per env step of all S)")
+          + " ".join(f"{k[:8]:>8}" for k in PIECES) + f" {'load':>5}     (split: us per env step of a member)")
 
 
 def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
@@ -232,6 +273,10 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     p.add_argument("--json", action="store_true", help="one JSON object per case on stdout")
     p.add_argument("--quick", action="store_true", help="a smoke test: TD3+BC, S=1, blocks of 100 steps, 300 steps, "
                    "10k rows; takes none of the case and size flags")
+    p.add_argument("--cpu-sync-dispatch", action="store_true",
+                   help="run CPU computations inline in the calling thread (jax_cpu_enable_async_dispatch = False; "
+                        "takes effect in a fresh process only): the policy call per step then skips a hand-off to "
+                        "XLA's thread")
     p.add_argument("--out", help="also append the JSON lines to results/benchmarks/OUT.jsonl (or OUT if it is a path)")
     args = p.parse_args(argv)
     sizes = {"--algo": args.algo, "--seeds": args.seeds, "--block": args.block, "--steps": args.steps,
@@ -252,11 +297,14 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     if bad:
         p.error(f"--block ({block}) must be a multiple of {', '.join(bad)}'s updates per call (the policy delay, 2)")
     out_path = results_path(p, args.out)
+    if args.cpu_sync_dispatch:
+        jax.config.update("jax_cpu_enable_async_dispatch", False)
 
     meta = {"command": " ".join([Path(sys.executable).name, "-m", "benchmarks.online", *sys.argv[1:]]),
             "date": datetime.datetime.now().isoformat(timespec="seconds"), "machine": machine(),
             "cores": sorted(os.sched_getaffinity(0)), "load_avg": [round(x, 2) for x in os.getloadavg()],
-            "xla_flags": os.environ.get("XLA_FLAGS", "")}
+            "xla_flags": os.environ.get("XLA_FLAGS", ""),
+            "cpu_async_dispatch": bool(jax.config.read("jax_cpu_enable_async_dispatch"))}
     log(f"# {meta['date']}  {meta['machine']}  cores {meta['cores']}  load {meta['load_avg']}  "
         f"XLA_FLAGS={meta['xla_flags']!r}")
     start = time.perf_counter()
