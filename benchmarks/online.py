@@ -243,6 +243,8 @@ def run_case(name: str, seeds: int, dataset, block: int, steps: int) -> dict[str
         "episodes_per_1000_steps": round(1000 * sum(b["episodes"] for b in plain[1:]) / timed_steps, 2),
         "policy_probe": probe,
         "compile_block_s": round(plain[0]["seconds"], 2),
+        "block_s": [round(b["seconds"], 2) for b in plain[1:]],
+        "split_block_s": [round(b["seconds"], 2) for b in shimmed[1:]],
         "compiles_in_timed_blocks": plain[-1]["compiles"] - plain[0]["compiles"] + shimmed[-1]["compiles"]
         - shimmed[0]["compiles"],
         "devices": driver.layout.mesh.size, "members_mode": driver.layout.mode,
