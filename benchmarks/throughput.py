@@ -140,8 +140,8 @@ def matmul_rate(n: int = 1024, reps: int = 7) -> float:
 # ------------------------------------------------------------------------------------------------------- dataset
 
 
-def synthetic_data(transitions: int, seed: int = 0) -> dict[str, jax.Array]:
-    """A random hopper-shaped dataset (episodes of 1000 steps, a few terminals) as the driver's device arrays."""
+def synthetic_dataset(transitions: int, seed: int = 0) -> Dataset:
+    """A random hopper-shaped dataset: episodes of 1000 steps, a few terminals."""
     rng = np.random.default_rng(seed)
     obs = rng.normal(size=(transitions + 1, OBS_DIM)).astype(np.float32)
     timeouts = np.zeros(transitions, np.float32)
@@ -151,7 +151,12 @@ def synthetic_data(transitions: int, seed: int = 0) -> dict[str, jax.Array]:
     ds = Dataset(obs[:-1], rng.uniform(-1, 1, (transitions, ACT_DIM)).astype(np.float32),
                  (1.0 + 0.1 * obs[:-1, 0]).astype(np.float32), obs[1:], terminals, timeouts, env="hopper",
                  name="hopper-synthetic", source="synthetic")
-    return device_data(ds, 0.99).arrays
+    return ds
+
+
+def synthetic_data(transitions: int, seed: int = 0) -> dict[str, jax.Array]:
+    """`synthetic_dataset` as the driver's device arrays."""
+    return device_data(synthetic_dataset(transitions, seed), 0.99).arrays
 
 
 # -------------------------------------------------------------------------------------------------------- timing

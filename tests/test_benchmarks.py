@@ -1,4 +1,5 @@
-"""Smoke tests of benchmarks/: the analytic FLOP counter and `benchmarks.throughput --quick` (no timing assertions)."""
+"""Smoke tests of benchmarks/: the analytic FLOP counter, `--quick --json` keys and one-line refusals (no timing
+assertions)."""
 import json
 
 import pytest
@@ -112,6 +113,42 @@ def test_device_check_runs_on_a_cpu_with_a_tiny_budget(tmp_path):
         assert c["updates_per_s"] > 0 and c["finite"] and "pct_of_fp32_matmul" in c and "peak_memory_bytes" in c
 
 
+ONLINE_KEYS = {"algo", "seeds", "block", "offline_updates_per_s", "online_env_steps_per_s", "pct_of_offline",
+               "split_us_per_step", "split_pct", "host_us_per_step", "scan_updates_per_s", "compiles_in_timed_blocks"}
+
+
+@pytest.mark.slow  # three compilations and 1,500 updates: ~50 s on a loaded core
+def test_online_quick_json_reports_the_split_and_no_compilation_per_block(capsys, tmp_path):
+    from benchmarks import online
+    from offrl_jax.online import loop
+
+    real = {n: getattr(loop, n) for n in ("collect", "insert", "exploration_policy", "MemberEnvs", "make_chunk_fn")}
+    out = tmp_path / "online.jsonl"
+    results = online.main(["--quick", "--json", "--out", str(out)])
+    (record,) = [json.loads(line) for line in capsys.readouterr().out.splitlines() if line.strip()]
+    assert record == results[0] and ONLINE_KEYS <= record.keys()
+    assert (record["algo"], record["seeds"], record["block"]) == ("td3bc", 1, 100)
+    assert set(record["split_us_per_step"]) == set(record["split_pct"]) == set(online.PIECES)
+    assert record["compiles_in_timed_blocks"] == 0  # nothing is recompiled per block
+    assert record["online_env_steps_per_s"] > 0 and record["offline_updates_per_s"] > 0
+    assert {n: getattr(loop, n) for n in real} == real  # the timing shims are gone
+    meta, saved = [json.loads(line) for line in out.read_text().splitlines()]
+    assert "command" in meta["meta"] and saved == record
+
+
+@pytest.mark.parametrize("args, said", [
+    (["--quick", "--seeds", "2"], "takes no --seeds"),
+    (["--steps", "1500", "--block", "1000"], "multiple of --block"),
+    (["--steps", "1000", "--block", "1000"], "at least 2 blocks"),
+    (["--algo", "td3bc", "--block", "999", "--steps", "1998"], "policy delay"),
+    (["--algo", "bc"], "--algo"),
+])
+def test_online_benchmark_refuses_bad_sizes_in_one_line(capsys, args, said):
+    from benchmarks.online import main
+
+    assert said in _refused(capsys, main, args)
+
+
 @pytest.mark.slow  # two fresh JAX processes; the answer is in benchmarks/README.md
 def test_scaling_runs_its_cases_at_a_tiny_size(capsys):
     from benchmarks.scaling import main
@@ -206,13 +243,14 @@ def _refused(capsys, main, argv) -> str:
 
 
 def _mains():
-    from benchmarks import device_check, memory, profile, throughput
+    from benchmarks import device_check, memory, online, profile, throughput
 
     return {"throughput": (throughput.main, ["--quick"]), "memory": (memory.main, ["--transitions", "1000"]),
-            "profile": (profile.main, ["--updates", "2"]), "device_check": (device_check.main, ["--quick"])}
+            "profile": (profile.main, ["--updates", "2"]), "device_check": (device_check.main, ["--quick"]),
+            "online": (online.main, ["--quick"])}
 
 
-@pytest.mark.parametrize("name", ["throughput", "memory", "profile", "device_check"])
+@pytest.mark.parametrize("name", ["throughput", "memory", "profile", "device_check", "online"])
 @pytest.mark.parametrize("saved", [b"a user's notes\n", b'{"a": 1}\n[1, 2]\n', b'{"a": 1}\n{"b"', b"\xff\xfe\x00"])
 def test_out_refuses_a_file_that_is_not_json_lines_and_leaves_it(capsys, tmp_path, name, saved):
     main, argv = _mains()[name]
@@ -223,7 +261,7 @@ def test_out_refuses_a_file_that_is_not_json_lines_and_leaves_it(capsys, tmp_pat
     assert [f.name for f in tmp_path.iterdir()] == ["notes.txt"]
 
 
-@pytest.mark.parametrize("name", ["throughput", "memory", "profile", "device_check"])
+@pytest.mark.parametrize("name", ["throughput", "memory", "profile", "device_check", "online"])
 def test_out_refuses_an_unusable_place_before_any_work(capsys, tmp_path, name):
     main, argv = _mains()[name]
     (tmp_path / "a-file").write_text("kept")

@@ -99,6 +99,8 @@ CASES = {
     "benchmarks.unifloral": {"number": (["--unifloral", "{tmp}", "--updates", "0"], "positive integer"),
                              "finite": (["--unifloral", "{tmp}", "--updates", "inf"], "positive integer"),
                              "missing": (["--unifloral", "{tmp}/none"], "none")},
+    "benchmarks.online": {"number": (["--steps", "0"], "positive integer"),
+                          "output": (["--quick", "--out", "{f}/x"], None)},
     "benchmarks.parallel": {"number": (["--seeds", "0"], "positive integer"),
                             "finite": (["--start-after", "nan"], "positive integer")},
 }
