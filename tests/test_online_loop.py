@@ -182,6 +182,9 @@ def test_online_measures_by_hand():
                   "train_score": t0, "train_episodes": e0},
                  {"variant": "a", "seed": 1, "phase": "online", "update": 50 + step, "score": s1, "env_steps": step,
                   "train_score": t1, "train_episodes": e1}]
+    from offrl_jax.run.results import pretrain_ends_of
+
+    assert pretrain_ends_of(rows) == {"a": 0}  # online rows are no pre-training
     (a,) = summarize_online(rows, ["a"], (0, 1), 1000, behaviour=36.0)
     assert a["handover"]["per_seed"] == [40.0, 30.0]
     assert a["dip"]["per_seed"] == [-5.0, 3.0]  # only the evaluation at 100 is in the first 10 %

@@ -86,11 +86,12 @@ def short_curves(rows: list[dict], budgets: dict[str, int]) -> dict[str, int | N
 
 def pretrain_ends_of(rows: list[dict]) -> dict[str, int]:
     """Per variant, the last evaluation before offline RL (0 if none): what `run_study` records as its
-    pre-training end (for BC, whose whole run is actor pre-training, the last evaluation)."""
+    pre-training end (for BC, whose whole run is actor pre-training, the last evaluation).  Online rows come after
+    every offline phase and are no pre-training."""
     ends: dict[str, int] = {}
     for r in rows:
         ends.setdefault(r["variant"], 0)
-        if r.get("phase", "offline_rl") != "offline_rl":
+        if r.get("phase", "offline_rl") not in ("offline_rl", "online"):
             ends[r["variant"]] = max(ends[r["variant"]], r["update"])
     return ends
 
