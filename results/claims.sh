@@ -4,6 +4,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 runs=(
+  results/mujoco_medium/default-v2
   results/mujoco_medium/default-v1
   results/mujoco_medium/default-5seeds
   results/mujoco_medium/300k-alpha2.5
