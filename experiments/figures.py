@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+from collections.abc import Callable
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -67,22 +68,10 @@ def stale(sources: dict, studies: dict, root: Path = ROOT) -> list[str]:
     return found
 
 
-def summary_of(run: Path, dataset: str | None = None) -> list[dict]:
-    """A run's summary with today's statistics, read and checked as `experiments.report` reads it; a run that did
-    not record its behaviour score gets the cached `dataset`'s (the version it trained on), not the current one's."""
-    from experiments.report import check_run, check_settled, current, read_summary
-    from offrl_jax.run.figures import behaviour_score
-
-    check_settled(run)
-    summary = read_summary(run / "summary.json")
-    if dataset and all(s.get("behaviour_score") is None for s in summary):
-        summary = [s | {"behaviour_score": behaviour_score(dataset)} for s in summary]
-    partial = check_run(run / "summary.json", summary)
-    return current(run / "summary.json", summary, partial=partial is not None)
-
-
-def redraw(sources_path: Path = SOURCES, studies_path: Path = STUDIES) -> list[Path]:
-    """Draw every figure of `sources_path` from its runs (each summarised by `summary_of`), then record each run's
+def redraw(summary_of: Callable[[Path, str | None], list[dict]], sources_path: Path = SOURCES,
+           studies_path: Path = STUDIES) -> list[Path]:
+    """Draw every figure of `sources_path` from its runs, each summarised by `summary_of(run, the data it trained
+    on)` (`experiments.report.run_summary`: as the report reads a run), then record each run's
     curves.csv SHA-256 there; a source that is not its study's current run is refused (ValueError) before anything
     is drawn.  Returns the files written."""
     from offrl_jax.run.figures import plot_studies

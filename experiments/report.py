@@ -159,6 +159,17 @@ def _last(rows: list[dict], budgets: dict[str, int]) -> dict[str, int | None]:
             for label in budgets}
 
 
+def run_summary(run: Path, dataset: str | None = None) -> list[dict]:
+    """A run's summary with today's statistics, read and checked as the report reads it; a run that did not record
+    its behaviour score gets the cached `dataset`'s (the version it trained on), not the current one's."""
+    check_settled(run)
+    summary = read_summary(run / "summary.json")
+    if dataset and all(s.get("behaviour_score") is None for s in summary):
+        summary = [s | {"behaviour_score": behaviour_score(dataset)} for s in summary]
+    partial = check_run(run / "summary.json", summary)
+    return current(run / "summary.json", summary, partial=partial is not None)
+
+
 def current(path: Path, summary: list[dict], reference: bool = True, partial: bool = False) -> list[dict]:
     """The summary with today's statistics: recomputed from the run's config.json and curves.csv where both are
     there (the behaviour score as the run recorded it, else from the cached dataset), else summary.json as it is,
@@ -222,7 +233,7 @@ def main(argv=None) -> int:
                 raise ValueError("--figures draws the runs of results/figures/sources.json; give nothing else")
             from experiments import figures
 
-            for path in figures.redraw():
+            for path in figures.redraw(run_summary):
                 print(f"figure: {path.relative_to(figures.ROOT)}", file=sys.stderr)
             return 0
         if not args.dirs:

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from experiments import figures
+from experiments import figures, report
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -81,12 +81,11 @@ def test_every_hopper_medium_panel_names_its_version():
         for panel in spec["panels"]:
             summary = json.loads((ROOT / panel["run"] / "summary.json").read_text())
             if summary[0]["dataset"] == "hopper-medium":
-                assert panel.get("dataset") in ("hopper-medium-v0", "hopper-medium-v1", "hopper-medium-v2"), (figure, panel)
+                versions = ("hopper-medium-v0", "hopper-medium-v1", "hopper-medium-v2")
+                assert panel.get("dataset") in versions, (figure, panel)
 
 
 def test_report_figures_takes_no_run_directories_and_report_needs_some(capsys):
-    from experiments import report
-
     assert report.main(["results/figure2/hopper-edac", "--figures"]) == 2
     assert report.main([]) == 2
     assert capsys.readouterr().err.strip().splitlines()[-1].startswith("error: give one or more run directories")
@@ -98,7 +97,7 @@ def test_redraw_draws_each_figure_from_its_runs_and_records_their_curves(tmp_pat
     sources.write_text(json.dumps({"one.png": {"shows": "a test", "drawn_by": "plot_studies", "panels": [panel]}}))
     studies = tmp_path / "studies.json"
     studies.write_text(json.dumps({panel["study"]: panel["run"]}))
-    written = figures.redraw(sources, studies)
+    written = figures.redraw(report.run_summary, sources, studies)
     assert written == [tmp_path / "one.png", tmp_path / "one.pdf"]
     assert (tmp_path / "one.png").read_bytes()[:4] == b"\x89PNG"
     [drawn] = json.loads(sources.read_text())["one.png"]["panels"]
@@ -112,5 +111,5 @@ def test_redraw_refuses_a_replaced_source_before_drawing_anything(tmp_path):
     studies = tmp_path / "studies.json"
     studies.write_text(json.dumps({panel["study"]: "results/figure2/hopper-edac-critic9k"}))
     with pytest.raises(ValueError, match="has been replaced by results/figure2/hopper-edac-critic9k"):
-        figures.redraw(sources, studies)
+        figures.redraw(report.run_summary, sources, studies)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["sources.json", "studies.json"]
