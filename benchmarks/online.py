@@ -108,7 +108,7 @@ def _timed(timers: dict[str, float], name: str, fn, wait: bool = False):
 def shims(driver: Driver, timers: dict[str, float]):
     """`run_online`'s pieces timed into `timers` (seconds, accumulated) while inside; everything restored after.
     `collect` and `MemberEnvs.step` are timed whole: their own share is what is left after the pieces inside them."""
-    names = ("collect", "exploration_policy", "device_rows", "insert", "make_chunk_fn", "MemberEnvs")
+    names = ("collect", "exploration_policy", "device_rows", "insert", "MemberEnvs")
     real = {n: getattr(loop, n) for n in names}
 
     class TimedMemberEnvs(real["MemberEnvs"]):
@@ -122,7 +122,6 @@ def shims(driver: Driver, timers: dict[str, float]):
     loop.exploration_policy = policy
     loop.device_rows = _timed(timers, "insert", real["device_rows"])
     loop.insert = _timed(timers, "insert", real["insert"], wait=True)
-    loop.make_chunk_fn = lambda *a, **k: _timed(timers, "update", real["make_chunk_fn"](*a, **k), wait=True)
     loop.MemberEnvs = TimedMemberEnvs
     for key, fn in driver._chunk_fns.items():  # the online scan compiled by an earlier pass
         if key[0] == "online":

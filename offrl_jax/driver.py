@@ -281,10 +281,14 @@ class Driver:
         """hparams -> phase `index` of the algorithm rebuilt with those (traced) hyper-parameter values."""
         return lambda hparams: with_hparams(self.algo, **hparams).phases(total)[index]
 
-    def _chunk_fn(self, phase: Phase, num_calls: int, phase_for=None) -> Callable:
+    def chunk_fn(self, phase: Phase, num_calls: int, phase_for=None, replay: Replay | None = None,
+                 phase_at=None) -> Callable:
+        """The jitted chunk function of `num_calls` update calls of `phase` (`make_chunk_fn` on this driver's
+        members), made once per (phase name, calls) and kept; `replay` and `phase_at` for the online phase."""
         key = (phase.name, num_calls)
         if key not in self._chunk_fns:
-            self._chunk_fns[key] = make_chunk_fn(phase, self.batch_size, num_calls, phase_for, self.layout)
+            self._chunk_fns[key] = make_chunk_fn(phase, self.batch_size, num_calls, phase_for, self.layout, replay,
+                                                 phase_at, swept=self.hparams is not None)
         return self._chunk_fns[key]
 
     def run(self, phases: list[Phase], chunk_updates: int, states: Any = None, start_update: int = 0,
@@ -353,17 +357,22 @@ class Driver:
         """`calls` update calls from global update `update`, as slices of `slice_calls(calls)`: (states, every
         member's metrics on the host, each the mean over the chunk, `finite` over all of it)."""
         size = slice_calls(calls)
-        fn, parts = self._chunk_fn(phase, size, phase_for), []
+        fn, parts = self.chunk_fn(phase, size, phase_for), []
         for k in range(calls // size):
             start = update + k * size * phase.updates_per_call
             states, metrics = fn(states, self.data, self.run_keys, jnp.int32(start), *extra)
             parts.append(self.real(to_host(metrics)))  # every member's, on every process
             if on_slice is not None:
                 on_slice(size * phase.updates_per_call)
-        if len(parts) == 1:
-            return states, parts[0]
-        finite = np.logical_and.reduce([p.pop("finite") for p in parts])
-        return states, {k: np.mean([p[k] for p in parts], axis=0) for k in parts[0]} | {"finite": finite}
+        return states, merge_metrics(parts)
+
+
+def merge_metrics(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    """Every member's metrics over several calls (each call's means): the mean of each metric, `finite` over all."""
+    if len(parts) == 1:
+        return parts[0]
+    finite = np.logical_and.reduce([np.asarray(p.pop("finite"), bool) for p in parts])
+    return {k: np.mean([p[k] for p in parts], axis=0) for k in parts[0]} | {"finite": finite}
 
 
 def _end_phase(phases: list[Phase], index: int, end: int) -> None:

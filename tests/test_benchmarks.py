@@ -122,7 +122,7 @@ def test_online_quick_json_reports_the_split_and_no_compilation_per_block(capsys
     from benchmarks import online
     from offrl_jax.online import loop
 
-    real = {n: getattr(loop, n) for n in ("collect", "insert", "exploration_policy", "MemberEnvs", "make_chunk_fn")}
+    real = {n: getattr(loop, n) for n in ("collect", "insert", "exploration_policy", "MemberEnvs", "device_rows")}
     out = tmp_path / "online.jsonl"
     results = online.main(["--quick", "--json", "--out", str(out)])
     (record,) = [json.loads(line) for line in capsys.readouterr().out.splitlines() if line.strip()]

@@ -26,7 +26,7 @@ import numpy as np
 
 from offrl_jax.algos.common import Phase, with_hparams
 from offrl_jax.data.device import DeviceData
-from offrl_jax.driver import Chunk, Driver, make_chunk_fn
+from offrl_jax.driver import Chunk, Driver, merge_metrics
 from offrl_jax.envs.registry import normalized_score
 from offrl_jax.online.buffer import device_rows, insert, new_buffer
 from offrl_jax.online.config import OnlineConfig
@@ -77,11 +77,7 @@ def run_online(driver: Driver, algo: Any, online: OnlineConfig, env: str, form: 
     phase, phase_at = online_phase(algo, offline_updates, online)
     replay = Replay(cfg.replay, cfg.online_mix, ended_only=getattr(algo, "reads_returns", False))
     calls = online.block * online.utd // phase.updates_per_call
-    key = ("online", calls)
-    if key not in driver._chunk_fns:
-        driver._chunk_fns[key] = make_chunk_fn(phase, driver.batch_size, calls, None, layout, replay, phase_at,
-                                               swept=driver.hparams is not None)
-    fn = driver._chunk_fns[key]
+    fn = driver.chunk_fn(phase, calls, replay=replay, phase_at=phase_at)
     extra = () if driver.hparams is None else (driver.hparams,)
     envs = MemberEnvs(env, members, make_env)
     try:
@@ -114,18 +110,9 @@ def run_online(driver: Driver, algo: Any, online: OnlineConfig, env: str, form: 
                 continue
             elapsed = time.perf_counter() - tic
             seconds += elapsed
-            yield Chunk("online", update, driver.real(states), _merge(parts, len(members)) |
-                        train_metrics(episodes, len(members), env), seconds, steps_done / elapsed,
-                        env_steps=envs.step_count)
+            metrics = merge_metrics(parts) if parts else {"finite": np.ones(len(members), bool)}  # warm-up only
+            yield Chunk("online", update, driver.real(states), metrics | train_metrics(episodes, len(members), env),
+                        seconds, steps_done / elapsed, env_steps=envs.step_count)
             parts, episodes, steps_done, tic = [], [], 0, time.perf_counter()
     finally:
         envs.close()
-
-
-def _merge(parts: list[dict[str, np.ndarray]], members: int) -> dict[str, np.ndarray]:
-    """The mean of every metric over the blocks of an interval, `finite` over all of them (no update: all finite)."""
-    if not parts:
-        return {"finite": np.ones(members, bool)}
-    finite = np.logical_and.reduce([np.asarray(p.pop("finite"), bool) for p in parts])
-    return {k: np.mean([p[k] for p in parts], axis=0) for k in parts[0]} | {"finite": finite}
-
