@@ -8,14 +8,12 @@ curves.csv.
 """
 from __future__ import annotations
 
-import io
 from pathlib import Path
 
 import numpy as np
 
 from offrl_jax.run import bc_level, stats
-from offrl_jax.run.results import all_nan_expected, score_matrix
-from offrl_jax.system.checkpoint import atomic_write_bytes
+from offrl_jax.run.results import all_nan_expected, score_matrix, write_figure
 
 
 def arms(summaries: list[list[dict]]) -> list[str]:
@@ -141,11 +139,4 @@ def plot_aggregate(summaries: list[list[dict]], curves: list[list[dict]], path: 
             ax.legend(fontsize=8)
     fig.suptitle(f"{result['tasks']} studies; intervals: stratified bootstrap over each study's seeds", fontsize=9)
     fig.tight_layout()
-    written = []
-    for target, kind in ((path, "png"), (path.with_suffix(".pdf"), "pdf")):
-        buffer = io.BytesIO()
-        fig.savefig(buffer, format=kind, dpi=110)
-        atomic_write_bytes(target, buffer.getvalue())
-        written.append(target)
-    plt.close(fig)
-    return written
+    return write_figure(fig, path, dpi=110, pdf=True)

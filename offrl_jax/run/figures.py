@@ -10,13 +10,11 @@ Updates are ticked as 20k / 1M; the figure is written as PNG and PDF.
 from __future__ import annotations
 
 import functools
-import io
 import json
 from pathlib import Path
 
 from offrl_jax.run.bc_level import figure_lines
-from offrl_jax.run.results import all_nan_expected, iqm_band, read_curves, score_matrix
-from offrl_jax.system.checkpoint import atomic_write_bytes
+from offrl_jax.run.results import all_nan_expected, iqm_band, read_curves, score_matrix, write_figure
 
 ALGO_NAMES = {"td3bc": "TD3+BC", "edac": "EDAC", "td3bc_cql": "TD3+BC+CQL", "edac_bc": "EDAC+BC", "bc": "BC",
               "cql": "CQL", "sacn": "SAC-N", "iql": "IQL", "rebrac": "ReBRAC"}
@@ -121,11 +119,4 @@ def plot_studies(study_dirs: list[Path], path: Path, reference: bool = True, ove
                 axes[r][c].axis("off")
     fig.suptitle("IQM over seeds; band: stratified-bootstrap 95 % interval", fontsize=9)
     fig.tight_layout()
-    written = []
-    for target, kind in ((path, "png"), (path.with_suffix(".pdf"), "pdf")):
-        buffer = io.BytesIO()
-        fig.savefig(buffer, format=kind, dpi=110)
-        atomic_write_bytes(target, buffer.getvalue())
-        written.append(target)
-    plt.close(fig)
-    return written
+    return write_figure(fig, path, dpi=110, pdf=True)

@@ -109,15 +109,12 @@ def plot_online(path, labels: list[str], rows: list[dict], seeds: tuple[int, ...
                 behaviour: float | None = None) -> None:
     """online.png: every variant's IQM score over seeds against online env steps, with its 95 % bootstrap band,
     starting at its hand-over score (env step 0), and a dashed line at the behaviour data's score."""
-    import io
-
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from offrl_jax.run.results import iqm_band
-    from offrl_jax.system.checkpoint import atomic_write_bytes
+    from offrl_jax.run.results import iqm_band, write_figure
 
     fig, ax = plt.subplots(figsize=(7, 4.5))
     for i, label in enumerate(labels):
@@ -136,7 +133,4 @@ def plot_online(path, labels: list[str], rows: list[dict], seeds: tuple[int, ...
     ax.grid(alpha=0.3)
     ax.legend()
     fig.tight_layout()
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=120)
-    plt.close(fig)
-    atomic_write_bytes(path, buffer.getvalue())
+    write_figure(fig, path)

@@ -129,6 +129,21 @@ def iqm_band(scores: np.ndarray, resamples: int = 2000) -> tuple[np.ndarray, np.
             np.array([e.value if e.high is None else e.high for e in found]))
 
 
+def write_figure(fig, path: Path, dpi: int = 120, pdf: bool = False) -> list[Path]:
+    """Write the matplotlib figure `fig` as PNG at `path` (and as PDF beside it with `pdf`), each file atomically,
+    and close it; returns the files written."""
+    import matplotlib.pyplot as plt
+
+    written = []
+    for target, kind in ((path, "png"), (path.with_suffix(".pdf"), "pdf"))[:2 if pdf else 1]:
+        buffer = io.BytesIO()
+        fig.savefig(buffer, format=kind, dpi=dpi)
+        atomic_write_bytes(target, buffer.getvalue())
+        written.append(target)
+    plt.close(fig)
+    return written
+
+
 def curves_title(name: str, dataset: str, seeds: int) -> str:
     """The title of a run's curves.png: what the band is, or that one seed has none."""
     band = f"{seeds} seeds, IQM and stratified-bootstrap 95% CI" if seeds > 1 else "1 seed: no interval"
@@ -163,7 +178,4 @@ def plot_curves(path: Path, study: Study, rows: list[dict], pretrain_ends: dict[
     ax.grid(alpha=0.3)
     ax.legend()
     fig.tight_layout()
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=120)
-    plt.close(fig)
-    atomic_write_bytes(path, buffer.getvalue())
+    write_figure(fig, path)
