@@ -30,7 +30,7 @@ from offrl_jax.algos.config import ONLINE_FIELDS
 from offrl_jax.driver import INIT, seed_keys
 from offrl_jax.run.results import read_curves
 from offrl_jax.run.study import Study, Variant
-from offrl_jax.system.checkpoint import load_checkpoint
+from offrl_jax.system.checkpoint import checkpoint_contents
 
 
 class ResumeMismatch(ValueError):
@@ -217,7 +217,7 @@ def start_from(study: Study, group: tuple[Variant, ...], data_sha256: str, templ
     differ = checkpoint_differences(payload, study, group, data_sha256)
     if differ:
         raise ValueError(f"{path}: made by another run ({'; '.join(differ[:3])})")
-    states, update, seconds, rows = load_checkpoint(path, template)
+    states, update, seconds, rows = checkpoint_contents(payload, template)
     if update != last_update or any(r.get("env_steps") for r in rows):
         raise ValueError(f"{path}: at update {update}, not at the end of its offline phases ({last_update}): "
                          f"finish it first (--resume {study.start_from})")

@@ -64,6 +64,10 @@ def save_checkpoint(path: str | Path, states: Any, update: int, seconds: float, 
 
 def load_checkpoint(path: str | Path, template_states: Any) -> tuple[Any, int, float, list[dict]]:
     """(states, update, seconds, history); `template_states` gives the pytree structure (e.g. a fresh init)."""
-    payload = serialization.msgpack_restore(Path(path).read_bytes())
+    return checkpoint_contents(serialization.msgpack_restore(Path(path).read_bytes()), template_states)
+
+
+def checkpoint_contents(payload: dict, template_states: Any) -> tuple[Any, int, float, list[dict]]:
+    """`load_checkpoint` of a checkpoint's payload already read (`serialization.msgpack_restore`)."""
     states = serialization.from_state_dict(template_states, payload["states"])
     return states, int(payload["update"]), float(payload["seconds"]), json.loads(payload["history"])
