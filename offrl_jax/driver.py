@@ -37,12 +37,11 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
 
 from offrl_jax.algos.common import Phase, with_hparams
 from offrl_jax.data.dataset import rows_without_timeouts
-from offrl_jax.data.device import DATA_FIELDS
-from offrl_jax.online.sampling import OPTIONAL_FIELDS, Replay, sample
+from offrl_jax.data.device import DATA_FIELDS, OPTIONAL_FIELDS
 from offrl_jax.system.distributed import to_host
 
-# beyond a dataset's device form (`offrl_jax.data.device`), the fields on the device only for an algorithm that
-# reads them (`uses_next_actions`: ReBRAC's critic penalty) are `offrl_jax.online.sampling.OPTIONAL_FIELDS`
+# draw(key, data, a member's online buffer, shape) -> the minibatches of an online update call
+Draw = Callable[[jax.Array, dict[str, jax.Array], Any, tuple[int, ...]], dict[str, jax.Array]]
 
 
 def next_actions(actions: jax.Array, terminals: jax.Array, timeouts: jax.Array) -> jax.Array:
@@ -139,7 +138,7 @@ def member_layout(members: int, devices=None, mode: str | None = None) -> Layout
 
 def make_chunk_fn(phase: Phase, batch_size: int, num_calls: int,
                   phase_for: Callable[[dict[str, jax.Array]], Phase] | None = None,
-                  layout: Layout | None = None, replay: Replay | None = None,
+                  layout: Layout | None = None, draw: Draw | None = None,
                   phase_at: Callable[[dict[str, jax.Array] | None, jax.Array], Phase] | None = None,
                   swept: bool = False) -> Callable:
     """jit(members(scan of `num_calls` update calls)):
@@ -152,11 +151,11 @@ def make_chunk_fn(phase: Phase, batch_size: int, num_calls: int,
     built with them) the function takes a last argument, hparams: {name: (S,) values}, and member m runs
     `phase_for({name: value_m})`.
 
-    The online phase: with `replay` the function takes the members' online buffers (`offrl_jax.online.buffer`,
-    leading axis M) after the start update, and each minibatch is drawn from the data and the member's buffer
-    (`offrl_jax.online.sampling.sample`); `phase_at(hparams or None, u)` gives the phase of update u (a schedule
-    over the phase, e.g. a decaying penalty) in place of `phase` / `phase_for`; `swept` then says whether the
-    function takes the hparams argument (a sweep).
+    The online phase: with `draw` the function takes the members' online buffers (`offrl_jax.online.buffer`,
+    leading axis M) after the start update, and each call's minibatches are `draw(key, data, the member's buffer,
+    shape)` (`offrl_jax.online.sampling.sample` with the phase's `Replay`); `phase_at(hparams or None, u)` gives the
+    phase of update u (a schedule over the phase, e.g. a decaying penalty) in place of `phase` / `phase_for`;
+    `swept` then says whether the function takes the hparams argument (a sweep).
     """
 
     def one_seed(state, data, key, start, buffer, hparams):
@@ -168,8 +167,8 @@ def make_chunk_fn(phase: Phase, batch_size: int, num_calls: int,
             k_idx, k_update = jax.random.split(jax.random.fold_in(key, update))
             now = member_phase if phase_at is None else phase_at(hparams, update)
             shape = (now.updates_per_call, batch_size)
-            if replay is not None:
-                return now.update(state, sample(k_idx, replay, data, buffer, shape), k_update)
+            if draw is not None:
+                return now.update(state, draw(k_idx, data, buffer, shape), k_update)
             idx = jax.random.randint(k_idx, shape, 0, n)
             idx = idx if rows is None else rows[idx]
             batch = {k: data[k][idx] for k in DATA_FIELDS + OPTIONAL_FIELDS if k in data} | {"idx": idx}
@@ -182,7 +181,7 @@ def make_chunk_fn(phase: Phase, batch_size: int, num_calls: int,
         return state, jax.tree.map(lambda m: jnp.mean(m, axis=0), metrics) | {"finite": finite}
 
     swept = swept or phase_for is not None
-    args = ["state", "data", "key", "start"] + (["buffer"] if replay is not None else []) + (["hparams"] if swept
+    args = ["state", "data", "key", "start"] + (["buffer"] if draw is not None else []) + (["hparams"] if swept
                                                                                                 else [])
     in_axes = tuple({"data": None, "start": None}.get(a, 0) for a in args)
 
@@ -281,13 +280,13 @@ class Driver:
         """hparams -> phase `index` of the algorithm rebuilt with those (traced) hyper-parameter values."""
         return lambda hparams: with_hparams(self.algo, **hparams).phases(total)[index]
 
-    def chunk_fn(self, phase: Phase, num_calls: int, phase_for=None, replay: Replay | None = None,
+    def chunk_fn(self, phase: Phase, num_calls: int, phase_for=None, draw: Draw | None = None,
                  phase_at=None) -> Callable:
         """The jitted chunk function of `num_calls` update calls of `phase` (`make_chunk_fn` on this driver's
-        members), made once per (phase name, calls) and kept; `replay` and `phase_at` for the online phase."""
+        members), made once per (phase name, calls) and kept; `draw` and `phase_at` for the online phase."""
         key = (phase.name, num_calls)
         if key not in self._chunk_fns:
-            self._chunk_fns[key] = make_chunk_fn(phase, self.batch_size, num_calls, phase_for, self.layout, replay,
+            self._chunk_fns[key] = make_chunk_fn(phase, self.batch_size, num_calls, phase_for, self.layout, draw,
                                                  phase_at, swept=self.hparams is not None)
         return self._chunk_fns[key]
 

@@ -18,6 +18,9 @@ from offrl_jax.data.dataset import Dataset, normalize_obs
 from offrl_jax.data.returns import returns_to_go
 
 DATA_FIELDS = ("observations", "actions", "rewards", "next_observations", "terminals", "timeouts", "returns")
+# beyond the device form, on the device only for an algorithm that reads them (`uses_next_actions`: ReBRAC's critic
+# penalty; `offrl_jax.driver.next_actions`)
+OPTIONAL_FIELDS = ("next_actions",)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -31,7 +31,7 @@ from offrl_jax.envs.registry import normalized_score
 from offrl_jax.online.buffer import device_rows, insert, new_buffer
 from offrl_jax.online.config import OnlineConfig
 from offrl_jax.online.envs import MemberEnvs, collect, exploration_keys, exploration_policy
-from offrl_jax.online.sampling import Replay
+from offrl_jax.online.sampling import Replay, sample
 from offrl_jax.system.distributed import to_host
 
 
@@ -77,7 +77,8 @@ def run_online(driver: Driver, algo: Any, online: OnlineConfig, env: str, form: 
     phase, phase_at = online_phase(algo, offline_updates, online)
     replay = Replay(cfg.replay, cfg.online_mix, ended_only=getattr(algo, "reads_returns", False))
     calls = online.block * online.utd // phase.updates_per_call
-    fn = driver.chunk_fn(phase, calls, replay=replay, phase_at=phase_at)
+    draw = lambda key, data, buffer, shape: sample(key, replay, data, buffer, shape)  # noqa: E731
+    fn = driver.chunk_fn(phase, calls, draw=draw, phase_at=phase_at)
     extra = () if driver.hparams is None else (driver.hparams,)
     envs = MemberEnvs(env, members, make_env)
     try:

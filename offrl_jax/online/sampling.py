@@ -24,12 +24,8 @@ import jax
 import jax.numpy as jnp
 
 from offrl_jax.algos.config import REPLAY_MODES
-from offrl_jax.data.device import DATA_FIELDS
+from offrl_jax.data.device import DATA_FIELDS, OPTIONAL_FIELDS
 from offrl_jax.online.buffer import OnlineBuffer
-
-# beyond a dataset's device form, present for an algorithm that reads them: ReBRAC's next dataset actions
-OPTIONAL_FIELDS = ("next_actions",)
-
 
 
 @dataclasses.dataclass(frozen=True)
