@@ -20,8 +20,8 @@ half online (replay mix, online-mix 0.5: Cal-QL, CORL's ReBRAC), IQL's rows appe
 CORL's IQL); TD3+BC and ReBRAC explore with Gaussian noise on their action (explore-noise: TD3's 0.1, CORL's ReBRAC
 0), SAC-N/EDAC and IQL's Gaussian policy with a sample; ReBRAC drops its critic penalty and decays its actor
 penalty to half over the online phase (CORL); TD3+BC keeps its alpha (the behaviour term still tracks the data the
-minibatches mix in).  A resumed run whose online phase had begun starts it again from the hand-over checkpoint,
-which recomputes it exactly (its randomness and the envs' resets are functions of the seeds and env steps).
+minibatches mix in).  A run stopped inside its online phase resumes at its last online evaluation, envs and
+buffers restored exactly (checkpoints/<variant>.online.msgpack; docs/online.md).
 
     python -m experiments.finetune
     python -m experiments.finetune --env hopper --online-steps 2000 --online-block 500 --online-eval-every 1000 \\

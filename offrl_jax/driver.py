@@ -233,6 +233,8 @@ class Chunk:
     updates_per_s: float
     ended: bool = False  # this chunk ended a self-ending (auto_stop) phase before its cap
     env_steps: int | None = None  # the online phase: env steps every member has taken (updates_per_s: env steps/s)
+    # the online phase: what a checkpoint saves to go on from here exactly (called before the phase goes on)
+    carry: Callable[[], dict | None] | None = None
 
 
 def _swept_on_start(phase_for: Callable[[dict[str, jax.Array]], Phase]) -> Callable:

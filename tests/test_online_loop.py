@@ -1,6 +1,11 @@
 """The online phase as a phase of a run: its settings, each family's online values and exploration, the loop on the
 driver's member axis, and `experiments.finetune` end to end (run, resume inside the online phase, refusals)."""
 import json
+import os
+import signal
+import subprocess
+import sys
+import time
 
 import jax
 import jax.numpy as jnp
@@ -15,7 +20,7 @@ from offrl_jax.online.config import OnlineConfig
 from offrl_jax.online.envs import exploration_policy
 from offrl_jax.online.loop import online_phase, run_online
 from offrl_jax.run.results import read_curves
-from tests.entry import run_module
+from tests.entry import ROOT, run_module
 
 
 @pytest.mark.parametrize("kwargs, fragment", [
@@ -150,6 +155,31 @@ def test_finetune_runs_end_to_end_and_a_resume_inside_the_online_phase_recompute
     again = read_curves(out / "curves.csv")
     key = lambda r: (r["variant"], r["seed"], r["update"], r.get("env_steps"))  # noqa: E731
     assert sorted((key(r), r["score"]) for r in again) == sorted((key(r), r["score"]) for r in rows)
+
+
+def test_a_run_killed_inside_the_online_phase_goes_on_from_its_last_checkpoint_exactly(tmp_path):
+    """SIGKILL after the first online evaluation: --resume restores every env's MuJoCo state, the episodes under way
+    and the online buffers, and continues from that env step; the curves equal the uninterrupted run's."""
+    args = [a for a in TINY if a != "scratch"] + ["--online-steps", "900"]  # one arm, 3 online evaluations
+    full, killed = tmp_path / "full", tmp_path / "killed"
+    assert run_module("experiments.finetune", *args, "--out", full).returncode == 0
+    assert not (full / "checkpoints" / "pretrained.online.msgpack").exists()  # removed once the phase is done
+    proc = subprocess.Popen([sys.executable, "-m", "experiments.finetune", *map(str, args), "--out", str(killed)],
+                            cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    saved, deadline = killed / "checkpoints" / "pretrained.online.msgpack", time.time() + 300
+    curves_csv = killed / "curves.csv"  # written after the checkpoint: an online row there means both are saved
+    while time.time() < deadline and proc.poll() is None and not (
+            curves_csv.exists() and ",online," in curves_csv.read_text()):
+        time.sleep(0.02)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    assert saved.exists() and not (killed / "summary.json").exists()
+    resumed = run_module("experiments.finetune", "--resume", killed, "--no-progress", "--parallel", "1")
+    assert resumed.returncode == 0, resumed.stderr
+    assert "the online phase goes on from env step" in resumed.stderr, resumed.stderr
+    key = lambda r: (r["variant"], r["seed"], r["update"], r.get("env_steps"))  # noqa: E731
+    curves = lambda out: sorted((key(r), r["score"], r.get("train_score")) for r in read_curves(out / "curves.csv"))  # noqa: E731
+    assert curves(killed) == curves(full)
 
 
 @pytest.mark.parametrize("args, fragment", [

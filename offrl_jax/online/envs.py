@@ -15,6 +15,7 @@ from typing import Any
 
 import jax
 import jax.numpy as jnp
+import mujoco
 import numpy as np
 
 from offrl_jax.driver import PHASE_START, seed_keys
@@ -103,9 +104,47 @@ class MemberEnvs:
             self.observations[episode.member] = self._reset(episode.member)
         return out, ended
 
+    def state(self) -> dict[str, np.ndarray] | None:
+        """Everything stepping on needs, as arrays (saved with an online checkpoint; `restore`): the env step, the
+        episodes under way (return, length, the observation acted on next) and each env's exact simulator state
+        (MuJoCo's integration state and the time limit's step count).  None for an env that is not MuJoCo's."""
+        physics = []
+        for env in self.envs:
+            model, data = (getattr(env.unwrapped, name, None) for name in ("model", "data"))
+            if not isinstance(data, mujoco.MjData) or _time_limit(env) is None:
+                return None
+            saved = np.empty(mujoco.mj_stateSize(model, SIM_STATE))
+            mujoco.mj_getState(model, data, saved, SIM_STATE)
+            physics.append(saved)
+        return {"step_count": np.int64(self.step_count), "episode_return": self.episode_return.copy(),
+                "episode_length": self.episode_length.copy(), "observations": self.observations.copy(),
+                "physics": np.stack(physics),
+                "elapsed": np.array([_time_limit(env)._elapsed_steps for env in self.envs], np.int64)}
+
+    def restore(self, state: dict[str, np.ndarray]) -> None:
+        """Continue from `state()` of envs of the same env name and seeds: every later step is what the saved envs
+        would have stepped."""
+        for env, physics, elapsed in zip(self.envs, state["physics"], state["elapsed"], strict=True):
+            mujoco.mj_setState(env.unwrapped.model, env.unwrapped.data, np.asarray(physics), SIM_STATE)
+            _time_limit(env)._elapsed_steps = int(elapsed)
+        self.step_count = int(state["step_count"])
+        self.episode_return = np.array(state["episode_return"], np.float64)
+        self.episode_length = np.array(state["episode_length"], np.int64)
+        self.observations = np.array(state["observations"], np.float32)
+
     def close(self) -> None:
         for env in self.envs:
             env.close()
+
+
+SIM_STATE = mujoco.mjtState.mjSTATE_INTEGRATION  # all MuJoCo needs to step on exactly as before
+
+
+def _time_limit(env: Any) -> Any:
+    """The TimeLimit wrapper of a gymnasium env (its `_elapsed_steps` ends episodes), or None."""
+    while env is not None and not hasattr(env, "_elapsed_steps"):
+        env = getattr(env, "env", None)
+    return env
 
 
 def collect(envs: MemberEnvs, policy: Callable[[np.ndarray, int], Any], steps: int

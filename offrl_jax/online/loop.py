@@ -23,12 +23,13 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
+from flax import serialization
 
 from offrl_jax.algos.common import Phase, with_hparams
 from offrl_jax.data.device import DeviceData
 from offrl_jax.driver import Chunk, Driver, merge_metrics
 from offrl_jax.envs.registry import normalized_score
-from offrl_jax.online.buffer import device_rows, insert, new_buffer
+from offrl_jax.online.buffer import OnlineBuffer, device_rows, insert, new_buffer
 from offrl_jax.online.config import OnlineConfig
 from offrl_jax.online.envs import MemberEnvs, collect, exploration_keys, exploration_policy
 from offrl_jax.online.sampling import Replay, sample
@@ -67,12 +68,15 @@ def train_metrics(episodes: list, members: int, env: str) -> dict[str, np.ndarra
 def run_online(driver: Driver, algo: Any, online: OnlineConfig, env: str, form: DeviceData, states: Any,
                offline_updates: int, seconds: float, reward_scale: float = 1.0,
                on_slice: Callable[[int], None] | None = None,
-               make_env: Callable[[], Any] | None = None) -> Iterator[Chunk]:
+               make_env: Callable[[], Any] | None = None, saved: dict | None = None) -> Iterator[Chunk]:
     """Fine-tune `states` (the hand-over, leading axis the driver's members) online in `env`, yielding a `Chunk`
     (phase "online", `env_steps` set, metrics the updates' means and `train_metrics`) every `online.eval_every` env
     steps.  `offline_updates` is the updates the offline phases made (the online phase's updates count on from
     there); `reward_scale` scales online rewards as the dataset's were (`Dataset.reward_scale` when they are
-    normalised); `on_slice(updates)` hears of every block's updates (a stop it raises ends the run there)."""
+    normalised); `on_slice(updates)` hears of every block's updates (a stop it raises ends the run there).
+
+    Each chunk's `carry()` is the phase's state there (`online_state`); `saved`, one of those with `states` the
+    checkpoint's, goes on from its env step as if the run had not stopped."""
     layout, members, cfg = driver.layout, driver.members, algo.cfg
     phase, phase_at = online_phase(algo, offline_updates, online)
     replay = Replay(cfg.replay, cfg.online_mix, ended_only=getattr(algo, "reads_returns", False))
@@ -86,13 +90,18 @@ def run_online(driver: Driver, algo: Any, online: OnlineConfig, env: str, form: 
         if envs.observations.shape[1] != obs_dim or envs.act_dim != act_dim:
             raise ValueError(f"{env}'s observations and actions ({envs.observations.shape[1]}, {envs.act_dim}) do "
                              f"not match the dataset's ({obs_dim}, {act_dim})")
-        buffer = layout.place(new_buffer(len(members), online.rows(envs.horizon), obs_dim, act_dim, cfg.gamma,
-                                         envs.horizon))
+        buffer = new_buffer(len(members), online.rows(envs.horizon), obs_dim, act_dim, cfg.gamma, envs.horizon)
+        update = offline_updates
+        if saved is not None:
+            buffer = serialization.from_state_dict(buffer, saved["buffer"])
+            envs.restore(saved["envs"])
+            update = int(saved["update"])
+        buffer = layout.place(buffer)
         explore = exploration_policy(algo.act, form.obs_mean, form.obs_std, cfg.explore_noise,
                                      getattr(algo, "explore", None))
         keys = exploration_keys(members)
         states = layout.place(states)
-        update, parts, episodes, steps_done = offline_updates, [], [], 0
+        parts, episodes, steps_done = [], [], 0
         tic = time.perf_counter()
         while envs.step_count < online.steps:
             acting = driver.real(states)
@@ -112,8 +121,20 @@ def run_online(driver: Driver, algo: Any, online: OnlineConfig, env: str, form: 
             elapsed = time.perf_counter() - tic
             seconds += elapsed
             metrics = merge_metrics(parts) if parts else {"finite": np.ones(len(members), bool)}  # warm-up only
+            carry = lambda b=buffer, u=update: online_state(driver, b, envs, u)  # noqa: E731
             yield Chunk("online", update, driver.real(states), metrics | train_metrics(episodes, len(members), env),
-                        seconds, steps_done / elapsed, env_steps=envs.step_count)
+                        seconds, steps_done / elapsed, env_steps=envs.step_count, carry=carry)
             parts, episodes, steps_done, tic = [], [], 0, time.perf_counter()
     finally:
         envs.close()
+
+
+def online_state(driver: Driver, buffer: OnlineBuffer, envs: MemberEnvs, update: int) -> dict | None:
+    """What going on from here needs besides the agent states (at an evaluation, where no training episode is
+    pending in the measures): the update and env step, every env's state and the members' online buffers, as host
+    arrays.  None when the envs cannot be saved (not MuJoCo's): a resume then starts the phase again."""
+    saved = envs.state()
+    if saved is None:
+        return None
+    return {"update": int(update), "env_steps": int(envs.step_count), "envs": saved,
+            "buffer": serialization.to_state_dict(to_host(driver.real(buffer)))}

@@ -30,7 +30,7 @@ from offrl_jax.algos.config import ONLINE_FIELDS
 from offrl_jax.driver import INIT, seed_keys
 from offrl_jax.run.results import read_curves
 from offrl_jax.run.study import Study, Variant
-from offrl_jax.system.checkpoint import checkpoint_contents
+from offrl_jax.system.checkpoint import atomic_write_bytes, checkpoint_contents
 
 
 class ResumeMismatch(ValueError):
@@ -41,13 +41,34 @@ def checkpoint_path(out_dir: Path, group: tuple[Variant, ...], which: str | int 
     """checkpoints/<labels>.msgpack: a group's last complete chunk (what --resume continues); with which="best",
     checkpoints/<label>.best.msgpack: one variant's seeds at its best seed-mean evaluation so far; with an update
     number, checkpoints/<labels>.<update>.msgpack: a group's checkpoint kept from that update (`keep_checkpoints`);
-    with "handover", checkpoints/<labels>.handover.msgpack: the states an online phase starts from."""
+    with "handover", checkpoints/<labels>.handover.msgpack: the states an online phase starts from; with "online",
+    checkpoints/<labels>.online.msgpack: the online phase's envs and buffers at the last checkpoint
+    (`save_online_state`)."""
     if which == "best":
         return out_dir / "checkpoints" / f"{group[0].label}.best.msgpack"
     labels = "+".join(v.label for v in group)
-    if which == "handover":  # a run with an online phase: the offline phases' last states, where online starts
-        return out_dir / "checkpoints" / f"{labels}.handover.msgpack"
+    if which in ("handover", "online"):  # a run with an online phase: where it starts, and where it has got to
+        return out_dir / "checkpoints" / f"{labels}.{which}.msgpack"
     return out_dir / "checkpoints" / (f"{labels}.msgpack" if which == "last" else f"{labels}.{int(which)}.msgpack")
+
+
+def save_online_state(path: Path, state: dict | None) -> None:
+    """Write the online phase's state (`offrl_jax.online.loop.online_state`) before the checkpoint it belongs to;
+    None (envs that cannot be saved) removes an older one, so a resume starts the phase again."""
+    if state is None:
+        path.unlink(missing_ok=True)
+    else:
+        atomic_write_bytes(path, serialization.msgpack_serialize(state))
+
+
+def load_online_state(path: Path, update: int, env_steps: int) -> dict | None:
+    """The online state saved with the checkpoint at (`update`, `env_steps`), or None: none saved, or one of
+    another point (a stop between the two writes), unreadable or incomplete."""
+    try:
+        state = serialization.msgpack_restore(path.read_bytes())
+        return state if (int(state["update"]), int(state["env_steps"])) == (update, env_steps) else None
+    except Exception:  # noqa: BLE001  anything unreadable: the phase starts again, as with no file
+        return None
 
 
 def kept_updates(out_dir: Path, group: tuple[Variant, ...]) -> list[int]:

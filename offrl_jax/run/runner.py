@@ -15,7 +15,8 @@ Output directory:
     checkpoints/     <variant>.msgpack, the last complete chunk of every variant (of every sweep group:
                      <label>+<label>...), <variant>.best.msgpack, its seeds at its best seed-mean evaluation, and
                      with `keep_checkpoints` = N the N newest of <variant>.<update>.msgpack; each with the
-                     observation statistics and the env, for `offrl_jax.policy.load_policy`
+                     observation statistics and the env, for `offrl_jax.policy.load_policy`; with an online phase,
+                     <variant>.handover.msgpack (where it started) and <variant>.online.msgpack while it runs
 """
 from __future__ import annotations
 
@@ -44,7 +45,15 @@ from offrl_jax.run.loggers import make_logger
 from offrl_jax.run.online_summary import plot_online
 from offrl_jax.run.provenance import fingerprint
 from offrl_jax.run.results import curves_title, plot_curves, pretrain_ends_of, write_curves
-from offrl_jax.run.resume import check_resume, checkpoint_path, group_identity, kept_updates, start_from
+from offrl_jax.run.resume import (
+    check_resume,
+    checkpoint_path,
+    group_identity,
+    kept_updates,
+    load_online_state,
+    save_online_state,
+    start_from,
+)
 from offrl_jax.run.study import Study, Variant
 from offrl_jax.run.summary import behaviour_score, summarize, summary_json
 from offrl_jax.system import distributed
@@ -237,18 +246,22 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
     ended, last_metrics = {}, None  # self-ended pre-training phases, for a resumed run
     online = study.online
     handover_path = checkpoint_path(out_dir, group, "handover")
+    online_path, saved_online = checkpoint_path(out_dir, group, "online"), None
     if study.start_from is not None and not (resume and ckpt_path.exists()):  # a finished run's offline phases
         states, start, seconds, rows = start_from(study, group, data_sha256, driver.init(), last_update)
         record()
     elif resume and ckpt_path.exists():
         states, start, seconds, rows = load_checkpoint(ckpt_path, driver.init())
         env_steps = max((r.get("env_steps", 0) for r in rows), default=0)
-        if online is not None and 0 < env_steps < online.steps:
-            # inside the online phase: it starts again from the hand-over, which it recomputes exactly (its
-            # randomness and the envs' resets are functions of the seeds and the env step)
-            states, start, seconds, rows = load_checkpoint(handover_path, driver.init())
-            bar.write(f"{name}: the online phase starts again from the hand-over (update {start}); it had reached "
-                      f"env step {env_steps:,}")
+        if online is not None and 0 < env_steps < online.steps:  # inside the online phase: it goes on exactly
+            saved_online = load_online_state(online_path, start, env_steps)
+            if saved_online is not None:
+                bar.write(f"{name}: the online phase goes on from env step {env_steps:,} (update {start})")
+            else:  # no saved envs: it starts again from the hand-over, which it recomputes exactly (its randomness
+                # and the envs' resets are functions of the seeds and the env step)
+                states, start, seconds, rows = load_checkpoint(handover_path, driver.init())
+                bar.write(f"{name}: the online phase starts again from the hand-over (update {start}); it had "
+                          f"reached env step {env_steps:,}")
         ended = {r["phase"]: r["update"] for r in rows if r.get("phase_ended")}
         last_metrics = _metrics_at(rows, member_names, start)
         record()
@@ -286,7 +299,7 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
         if online is not None:
             scale = ds.reward_scale() if config.normalize_reward else 1.0
             yield from run_online(driver, algo, online, study.env, data, handover["states"], last_update,
-                                  handover["seconds"], scale, on_slice)
+                                  handover["seconds"], scale, on_slice, saved=saved_online)
 
     for chunk in chunks():
         if recorder.stop.is_set():
@@ -323,9 +336,12 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
         # the first evaluation too: a variant with rows in curves.csv always has a checkpoint to resume from
         # every evaluation (`checkpoint_every` 0), or the first one past each multiple of `checkpoint_every`
         due = not study.checkpoint_every or chunk.update // every > last_saved // every
-        online_chunk = chunk.env_steps is not None  # online: every evaluation (a resume starts at the hand-over)
+        online_chunk = chunk.env_steps is not None  # online: every evaluation, with the envs and buffers
         if due or online_chunk or chunk.update == last_update or not ckpt_path.exists():
+            carried = chunk.carry() if online_chunk and chunk.env_steps < online.steps else None  # every process
             if writer:
+                if online_chunk:  # first, so that a checkpoint never points at an older online state
+                    save_online_state(online_path, carried)
                 save_checkpoint(ckpt_path, host_states, chunk.update, chunk.seconds, rows, meta)
                 if study.keep_checkpoints and not online_chunk:
                     _keep(out_dir, group, chunk.update, study.keep_checkpoints)
