@@ -225,6 +225,23 @@ def test_online_measures_by_hand():
     assert best["score"] == pytest.approx(0.9 * 65.0) and best["env_steps"] == [1000, 1000]
 
 
+def test_warm_up_evaluations_keep_the_hand_over_on_the_update_axis():
+    """Evaluations during the warm-up share the hand-over's update: against updates the hand-over's score stays,
+    against env steps (the online measures) every evaluation is there."""
+    from offrl_jax.run.online_summary import online_curves
+    from offrl_jax.run.results import score_matrix
+
+    rows = [{"variant": "a", "seed": 0, "phase": "offline_rl", "update": 50, "score": 40.0, "seconds": 1.0},
+            {"variant": "a", "seed": 0, "phase": "online", "update": 50, "score": 10.0, "seconds": 2.0,
+             "env_steps": 100},
+            {"variant": "a", "seed": 0, "phase": "online", "update": 150, "score": 60.0, "seconds": 3.0,
+             "env_steps": 200}]
+    updates, _, scores = score_matrix(rows, "a")
+    assert updates.tolist() == [50, 150] and scores.tolist() == [[40.0, 60.0]]
+    curves = online_curves(rows, "a", (0,))
+    assert curves["handover"].tolist() == [40.0] and curves["scores"].tolist() == [[10.0, 60.0]]
+
+
 def test_finetune_from_a_finished_offline_run_starts_at_its_checkpoint(tmp_path):
     offline = tmp_path / "offline"
     argv = ["--env", "hopper", "--updates", "400", "--eval-every", "200", "--seeds", "2", "--max-transitions",

@@ -97,8 +97,12 @@ def pretrain_ends_of(rows: list[dict]) -> dict[str, int]:
 
 
 def score_matrix(rows: list[dict], label: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(updates (E,), seconds (E,), scores (S, E)) of one variant."""
+    """(updates (E,), seconds (E,), scores (S, E)) of one variant.  The online phase's warm-up evaluations, made
+    before its first update, are left out: the hand-over's update is the offline phases' last evaluation
+    (`offrl_jax.run.online_summary.online_curves` has them, by env step)."""
     mine = [r for r in rows if r["variant"] == label]
+    last_offline = max((r["update"] for r in mine if r.get("phase") != "online"), default=-1)
+    mine = [r for r in mine if r.get("phase") != "online" or r["update"] > last_offline]
     updates = np.array(sorted({r["update"] for r in mine}))
     seeds = sorted({r["seed"] for r in mine})
     scores = np.full((len(seeds), len(updates)), np.nan)
