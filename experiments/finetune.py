@@ -42,6 +42,9 @@ from offrl_jax.online.config import OnlineConfig
 from offrl_jax.run.study import Study, reference_label
 from offrl_jax.system.cli import UsageError, int_at_least, positive_int
 
+# the online loop flags' defaults: OnlineConfig's own
+ONLINE_DEFAULTS = {f.name: f.default for f in dataclasses.fields(OnlineConfig) if f.default is not dataclasses.MISSING}
+
 ARMS = {"pretrained": {"pretrain": "actor+critic"}, "scratch": {"pretrain": "none"},
         "pretrain-only": {"pretrain": "actor+critic"},  # pre-training takes the offline budget
         "online-rl": {"pretrain": "none", "offline_updates": 0}}  # no offline phase; the family without its
@@ -126,22 +129,22 @@ def make_parser():
                         "online-rl form)")
     g.add_argument("--online-steps", type=positive_int, default=50_000,
                    help="env steps per seed after the offline phases (default %(default)s)")
-    g.add_argument("--online-block", type=positive_int, default=1_000,
+    g.add_argument("--online-block", type=positive_int, default=ONLINE_DEFAULTS["block"],
                    help="env steps collected between two scans of updates; the online steps, the warm-up and the "
                         "online evaluation interval are multiples of it (default %(default)s)")
-    g.add_argument("--utd", type=positive_int, default=1,
+    g.add_argument("--utd", type=positive_int, default=ONLINE_DEFAULTS["utd"],
                    help="updates per env step (default %(default)s)")
-    g.add_argument("--warmup-steps", type=int_at_least(0), default=0,
+    g.add_argument("--warmup-steps", type=int_at_least(0), default=ONLINE_DEFAULTS["warmup"],
                    help="env steps collected with the hand-over policy before the first online update (WSRL: "
                         "5000; default %(default)s)")
-    g.add_argument("--buffer-capacity", type=int_at_least(0), default=0,
+    g.add_argument("--buffer-capacity", type=int_at_least(0), default=ONLINE_DEFAULTS["capacity"],
                    help="online buffer rows per seed; 0: every online step, nothing overwritten (default)")
     g.add_argument("--from", dest="from_run", type=Path, default=None, metavar="RUN_DIR",
                    help="fine-tune the variants of this finished offline run (its checkpoints, settings, seeds and "
                         "data) instead of training them again; only online flags may be given with it")
     g.add_argument("--variant", nargs="+", default=None,
                    help="with --from: the variants to fine-tune (default: all)")
-    g.add_argument("--online-eval-every", type=positive_int, default=5_000,
+    g.add_argument("--online-eval-every", type=positive_int, default=ONLINE_DEFAULTS["eval_every"],
                    help="env steps between online evaluations (default %(default)s)")
     return p
 

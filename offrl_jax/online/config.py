@@ -15,7 +15,7 @@ class OnlineConfig:
     utd: int = 1  # updates per env step (the update-to-data ratio)
     warmup: int = 0  # env steps collected with the hand-over policy before the first online update (WSRL: 5000)
     capacity: int = 0  # online buffer rows per member; 0: every online step (nothing is overwritten)
-    eval_every: int = 10_000  # env steps between evaluations
+    eval_every: int = 5_000  # env steps between evaluations
 
     def __post_init__(self):
         for name in ("steps", "block", "utd", "eval_every"):
