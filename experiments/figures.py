@@ -2,8 +2,9 @@
 
     python -m experiments.report --figures
 
-`results/figures/sources.json` lists every figure: what it shows, how it is drawn (`offrl_jax.run.figures.plot_studies`,
-one panel per run) and its panels, each with its study (a key of `results/studies.json`), the run drawn, the data the
+`results/figures/sources.json` lists every figure: what it shows, how it is drawn (`drawn_by`:
+`offrl_jax.run.figures.plot_studies`, one panel per run against updates, or `plot_online_studies`, against online
+env steps) and its panels, each with its study (a key of `results/studies.json`), the run drawn, the data the
 run trained on where the run's own dataset name does not say which version (e.g. `hopper-medium-v0`), and the SHA-256
 of the run's curves.csv when the figure was last drawn (written by the command).  `results/studies.json` is the one
 place that says which run is a study's current one: a newer run that replaces it is recorded there.
@@ -68,13 +69,24 @@ def stale(sources: dict, studies: dict, root: Path = ROOT) -> list[str]:
     return found
 
 
+DRAWERS = ("plot_studies", "plot_online_studies")  # the functions of offrl_jax.run.figures a figure is drawn by
+
+
+def drawer(spec: dict) -> str:
+    """The function a figure's "drawn_by" names ("offrl_jax.run.figures.plot_studies, one panel per run")."""
+    name = spec["drawn_by"].split(",")[0].strip().rsplit(".", 1)[-1]
+    if name not in DRAWERS:
+        raise ValueError(f"drawn_by {spec['drawn_by']!r}: expected one of {', '.join(DRAWERS)}")
+    return name
+
+
 def redraw(summary_of: Callable[[Path, str | None], list[dict]], sources_path: Path = SOURCES,
            studies_path: Path = STUDIES) -> list[Path]:
     """Draw every figure of `sources_path` from its runs, each summarised by `summary_of(run, the data it trained
     on)` (`experiments.report.run_summary`: as the report reads a run), then record each run's
     curves.csv SHA-256 there; a source that is not its study's current run is refused (ValueError) before anything
     is drawn.  Returns the files written."""
-    from offrl_jax.run.figures import plot_studies
+    from offrl_jax.run import figures as drawing
     from offrl_jax.system.checkpoint import atomic_write_bytes
 
     sources, studies = read_json(sources_path), read_json(studies_path)
@@ -85,8 +97,9 @@ def redraw(summary_of: Callable[[Path, str | None], list[dict]], sources_path: P
     written = []
     for figure, spec in sources.items():
         runs, datasets = [ROOT / panel["run"] for panel in spec["panels"]], [p.get("dataset") for p in spec["panels"]]
-        written += plot_studies(runs, sources_path.parent / figure, datasets=datasets,
-                                summaries=[summary_of(run, data) for run, data in zip(runs, datasets)])
+        draw = getattr(drawing, drawer(spec))
+        written += draw(runs, sources_path.parent / figure, datasets=datasets,
+                        summaries=[summary_of(run, data) for run, data in zip(runs, datasets)])
         for panel, run in zip(spec["panels"], runs):
             panel["curves_sha256"] = curves_sha256(run)
     atomic_write_bytes(sources_path, (json.dumps(sources, indent=2) + "\n").encode())

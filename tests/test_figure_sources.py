@@ -113,3 +113,11 @@ def test_redraw_refuses_a_replaced_source_before_drawing_anything(tmp_path):
     with pytest.raises(ValueError, match="has been replaced by results/figure2/hopper-edac-critic9k"):
         figures.redraw(report.run_summary, sources, studies)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["sources.json", "studies.json"]
+
+
+def test_every_figure_names_the_function_that_draws_it():
+    assert {figures.drawer(spec) for spec in figures.read_json(figures.SOURCES).values()} <= set(figures.DRAWERS)
+    assert figures.drawer({"drawn_by": "offrl_jax.run.figures.plot_online_studies, one panel per run"}) == \
+        "plot_online_studies"
+    with pytest.raises(ValueError, match="expected one of plot_studies"):
+        figures.drawer({"drawn_by": "somewhere.plot_anything"})

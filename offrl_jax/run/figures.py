@@ -5,7 +5,8 @@ Each panel draws every variant's IQM score over seeds against updates with its 9
 where pre-training ended, a dashed line at the behaviour data's score (the mean D4RL-normalised return of the
 dataset's episodes) when that dataset is in the cache, and a dash-dot line at the study's BC level
 (`offrl_jax.run.bc_level`; not with `overlay`).  `overlay=True` draws every study in one panel instead.
-Updates are ticked as 20k / 1M; the figure is written as PNG and PDF.
+Updates are ticked as 20k / 1M; the figure is written as PNG and PDF.  `plot_online_studies` draws runs with an
+online phase against env steps.
 """
 from __future__ import annotations
 
@@ -117,6 +118,37 @@ def plot_studies(study_dirs: list[Path], path: Path, reference: bool = True, ove
         for c in range(len(cols)):
             if (r, c) not in used:
                 axes[r][c].axis("off")
+    fig.suptitle("IQM over seeds; band: stratified-bootstrap 95 % interval", fontsize=9)
+    fig.tight_layout()
+    return write_figure(fig, path, dpi=110, pdf=True)
+
+
+def plot_online_studies(study_dirs: list[Path], path: Path, summaries: list[list[dict]] | None = None,
+                        datasets: list[str | None] | None = None) -> list[Path]:
+    """One panel per run with an online phase, in a row: every variant's IQM score against online env steps from
+    its hand-over (`offrl_jax.run.online_summary.draw_online`), written to `path` as PNG and PDF."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter
+
+    from offrl_jax.run.online_summary import draw_online
+
+    if summaries is None:
+        summaries = [json.loads((d / "summary.json").read_text()) for d in study_dirs]
+    datasets = datasets or [None] * len(study_dirs)
+    fig, axes = plt.subplots(1, len(study_dirs), figsize=(5.6 * len(study_dirs), 4.0), squeeze=False)
+    for ax, study_dir, summary, dataset in zip(axes[0], study_dirs, summaries, datasets):
+        rows, seeds = read_curves(study_dir / "curves.csv"), tuple(summary[0]["seeds"])
+        behaviour = next((s["behaviour_score"] for s in summary if s.get("behaviour_score") is not None), None)
+        draw_online(ax, [s["variant"] for s in summary], rows, seeds, behaviour, fontsize=7)
+        steps = max((int(r["env_steps"]) for r in rows if r.get("phase") == "online"), default=0)
+        offline = max(s["updates"] for s in summary)
+        ax.set_title(f"{data_label(dataset or summary[0]['dataset'])}, "
+                     f"{ALGO_NAMES.get(summary[0]['algo'], summary[0]['algo'])} ({len(seeds)} seeds, "
+                     f"{updates_label(offline)} updates + {updates_label(steps)} env steps)", fontsize=10)
+        ax.xaxis.set_major_formatter(FuncFormatter(updates_label))
     fig.suptitle("IQM over seeds; band: stratified-bootstrap 95 % interval", fontsize=9)
     fig.tight_layout()
     return write_figure(fig, path, dpi=110, pdf=True)

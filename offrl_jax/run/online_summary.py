@@ -107,16 +107,28 @@ def online_table(online: list[dict]) -> list[str]:
 @all_nan_expected()
 def plot_online(path, labels: list[str], rows: list[dict], seeds: tuple[int, ...], title: str,
                 behaviour: float | None = None) -> None:
-    """online.png: every variant's IQM score over seeds against online env steps, with its 95 % bootstrap band,
-    starting at its hand-over score (env step 0), and a dashed line at the behaviour data's score."""
+    """online.png: `draw_online` of a run, titled."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from offrl_jax.run.results import iqm_band, write_figure
+    from offrl_jax.run.results import write_figure
 
     fig, ax = plt.subplots(figsize=(7, 4.5))
+    draw_online(ax, labels, rows, seeds, behaviour)
+    ax.set_title(title, fontsize=10)
+    fig.tight_layout()
+    write_figure(fig, path)
+
+
+@all_nan_expected()
+def draw_online(ax, labels: list[str], rows: list[dict], seeds: tuple[int, ...], behaviour: float | None = None,
+                fontsize: float | None = None) -> None:
+    """Every variant's IQM score over seeds against online env steps, with its 95 % bootstrap band, starting at
+    its hand-over score (env step 0), and a dashed line at the behaviour data's score."""
+    from offrl_jax.run.results import iqm_band
+
     for i, label in enumerate(labels):
         c = online_curves(rows, label, tuple(seeds))
         if not len(c["env_steps"]):
@@ -126,11 +138,8 @@ def plot_online(path, labels: list[str], rows: list[dict], seeds: tuple[int, ...
         ax.plot(steps, middle, label=label, color=f"C{i}")
         ax.fill_between(steps, low, high, alpha=0.2, color=f"C{i}")
     if behaviour is not None:
-        ax.axhline(behaviour, color="gray", ls="--", lw=1, label="behaviour data")
-    ax.set_xlabel("online env steps per seed (0: the hand-over from the offline phases)")
+        ax.axhline(behaviour, color="gray", ls="--", lw=1, label=f"behaviour data ({behaviour:.1f})")
+    ax.set_xlabel("online env steps per seed (0: the hand-over)")
     ax.set_ylabel("D4RL-normalised score")
-    ax.set_title(title, fontsize=10)
     ax.grid(alpha=0.3)
-    ax.legend()
-    fig.tight_layout()
-    write_figure(fig, path)
+    ax.legend(fontsize=fontsize)
