@@ -254,18 +254,18 @@ def test_a_run_stopped_after_its_first_evaluation_has_a_checkpoint_to_resume_fro
     """The first evaluation (here the hand-over at 100, off the 200-update checkpoint grid) writes a checkpoint
     along with its rows, so a stop right after it leaves a run that resumes instead of one refused for rows
     without a checkpoint."""
-    from offrl_jax.run import runner
+    from offrl_jax.run import progress
     from offrl_jax.run.resume import check_resume
 
     study = tiny_study(updates=400, eval_every=100, checkpoint_every=400,
                        variants=(Variant.of("pretrained", "td3bc", pretrain_updates=100, hidden=(32, 32)),))
-    set_rows = runner._Recorder.set
+    set_rows = progress.Recorder.set
 
     def stop_after_first(self, rows_by_label):
         set_rows(self, rows_by_label)
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(runner._Recorder, "set", stop_after_first)
+    monkeypatch.setattr(progress.Recorder, "set", stop_after_first)
     ds = synthetic_dataset()
     with pytest.raises(KeyboardInterrupt):
         run_study(study, tmp_path / "run", ds, progress=False)

@@ -25,14 +25,12 @@ import math
 import os
 import shutil
 import sys
-import threading
 import time
 from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
 from pathlib import Path
 
 import jax
 import numpy as np
-from tqdm.auto import tqdm
 
 from offrl_jax.algos import make_algorithm
 from offrl_jax.data.dataset import Dataset
@@ -43,8 +41,9 @@ from offrl_jax.online.loop import run_online
 from offrl_jax.run.bc_level import figure_lines
 from offrl_jax.run.loggers import make_logger
 from offrl_jax.run.online_summary import plot_online
+from offrl_jax.run.progress import Progress, Recorder
 from offrl_jax.run.provenance import fingerprint
-from offrl_jax.run.results import curves_title, plot_curves, pretrain_ends_of, write_curves
+from offrl_jax.run.results import curves_title, plot_curves, pretrain_ends_of
 from offrl_jax.run.resume import (
     check_resume,
     checkpoint_path,
@@ -104,8 +103,8 @@ def run_study(study: Study, out_dir: Path, dataset: Dataset, resume: bool = Fals
         atomic_write_text(config_path, record)
     online_updates = study.online.updates() if study.online else 0
     offline = sum(study.config(v.label).budget(study.updates) for v in study.variants)
-    bar = _Progress(offline + len(study.variants) * online_updates, progress, quiet=not writer)
-    recorder = _Recorder(out_dir / "curves.csv" if writer else None, [v.label for v in study.variants],
+    bar = Progress(offline + len(study.variants) * online_updates, progress, quiet=not writer)
+    recorder = Recorder(out_dir / "curves.csv" if writer else None, [v.label for v in study.variants],
                          logger if writer else None)
     pretrain_ends: dict[str, int] = {}
     groups = study.groups()
@@ -158,66 +157,8 @@ class Stopped(RuntimeError):
     """Another variant failed or the run was interrupted; this one stopped at the end of a slice."""
 
 
-class _Progress:
-    """The progress bar, or with `progress` off one plain line per evaluation (so a batch log shows the run as it
-    goes), or with `quiet` nothing (the other processes of a multi-process run); `update`, `set_postfix_str`,
-    `write` and `close` as tqdm's, `status` a postfix that a batch log does not get."""
-
-    def __init__(self, total: int, progress: bool, quiet: bool = False):
-        self.bar = tqdm(total=total, disable=quiet or not progress, unit="upd", dynamic_ncols=True, file=sys.stderr)
-        self.plain, self.quiet, self.total, self.done = not progress and not quiet, quiet, total, 0
-        self.tic = time.monotonic()
-
-    def update(self, n: int) -> None:
-        self.bar.update(n)
-        self.done += n
-
-    def status(self, text: str) -> None:
-        """What is going on, on the bar only (not a line of a batch log)."""
-        if not self.plain:
-            self.bar.set_postfix_str(text)
-
-    def set_postfix_str(self, text: str) -> None:
-        if not self.plain:
-            return self.bar.set_postfix_str(text)
-        minutes, seconds = divmod(int(time.monotonic() - self.tic), 60)
-        print(f"[{100 * self.done / self.total:3.0f}% {minutes:3d}:{seconds:02d}] {text}", file=sys.stderr, flush=True)
-
-    def write(self, text: str, file=None) -> None:
-        if not self.quiet:
-            self.bar.write(text, file=sys.stderr)
-
-    def close(self) -> None:
-        self.bar.close()
-
-
-class _Recorder:
-    """Rows of every variant (in study order), written to curves.csv after each evaluation (and handed to the
-    `logger`, if any; with `path` None, only kept); thread-safe."""
-
-    def __init__(self, path: Path | None, labels: list[str], logger=None):
-        self.path, self.rows, self.logger = path, {label: [] for label in labels}, logger
-        self.lock, self.stop = threading.Lock(), threading.Event()
-
-    def set(self, rows_by_label: dict[str, list[dict]]) -> None:
-        with self.lock:
-            self.rows.update({label: list(rows) for label, rows in rows_by_label.items()})
-            if self.path is not None:
-                write_curves(self.path, self.all_rows())
-            if self.logger is not None:
-                try:
-                    self.logger.log([row for rows in rows_by_label.values() for row in rows])
-                except Exception as e:  # noqa: BLE001 -- the logger is a copy; training and curves.csv go on
-                    print(f"warning: the logger failed ({type(e).__name__}: {e}); it is off for the rest of the run",
-                          file=sys.stderr)
-                    self.logger = None
-
-    def all_rows(self) -> list[dict]:
-        return [row for rows in self.rows.values() for row in rows]
-
-
 def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: Dataset, data_sha256: str,
-               out_dir: Path, resume: bool, bar, recorder: _Recorder, data: DeviceData | None = None) -> int:
+               out_dir: Path, resume: bool, bar, recorder: Recorder, data: DeviceData | None = None) -> int:
     """Train one variant (S seeds in one program), or a sweep group (values x seeds in one program), evaluating
     between chunks; returns the number of pre-training updates.  `data`: `ds`'s device form for the group's config,
     where the caller shares one (a worker process makes its own)."""
