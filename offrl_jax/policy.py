@@ -6,8 +6,9 @@
 
 The policy is the deterministic one the evaluations score (TD3+BC's actor; tanh of the EDAC/CQL actor's mean), on
 observations normalised with the training data's statistics, which the checkpoint stores.  It acts from the
-variant's last checkpoint (the state after its last complete chunk of updates; `policy.update`), or from the one
-taken at its best seed-mean evaluation (`checkpoint="best"`).
+variant's last checkpoint (the state after its last complete chunk of updates; `policy.update`), from the one
+taken at its best seed-mean evaluation (`checkpoint="best"`), or in a run with an online phase from the states it
+started from (`checkpoint="handover"`).
 
 `policy.export(path)` writes the whole policy (normalisation included) as a serialized `jax.export` function with a
 symbolic batch size; `load_exported(path)` reads it back with nothing but JAX.
@@ -111,12 +112,14 @@ def load_policy(run_dir: str | Path, variant: str | None = None, seed: int | Non
                 checkpoint: str | int = "last") -> Policy:
     """The deterministic policy of `variant` (default: the run's first) and `seed` (default: its first) from the
     run saved in `run_dir`: its last checkpoint, with checkpoint="best" the one taken at the variant's best
-    seed-mean evaluation, or with an update number one kept by `keep_checkpoints`.  Raises ValueError (one line)
+    seed-mean evaluation, with "handover" the offline phases' last states where an online phase started, or with
+    an update number one kept by `keep_checkpoints`.  Raises ValueError (one line)
     for a run, variant, seed or checkpoint that is not there."""
     seed = int(seed) if isinstance(seed, np.integer) else seed  # numpy integers are integers
     checkpoint = int(checkpoint) if isinstance(checkpoint, np.integer) else checkpoint
-    if checkpoint not in ("last", "best") and (isinstance(checkpoint, bool) or not isinstance(checkpoint, int)):
-        raise ValueError(f"checkpoint must be 'last', 'best' or an update number, not {checkpoint!r}")
+    if checkpoint not in ("last", "best", "handover") and (isinstance(checkpoint, bool) or
+                                                          not isinstance(checkpoint, int)):
+        raise ValueError(f"checkpoint must be 'last', 'best', 'handover' or an update number, not {checkpoint!r}")
     if isinstance(checkpoint, int) and checkpoint < 0:
         raise ValueError(f"checkpoint = {checkpoint} must be an update number >= 0 (or 'last', 'best')")
     if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int)):

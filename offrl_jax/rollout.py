@@ -65,12 +65,12 @@ def rollout(policy, episodes: int, video: Path | None = None, max_frames: int | 
 
 
 def _which(text: str) -> str | int:
-    if text in ("last", "best"):
+    if text in ("last", "best", "handover"):
         return text
     try:
         return int_at_least(0)(text)
     except argparse.ArgumentTypeError:
-        raise argparse.ArgumentTypeError(f"expected last, best or an update number >= 0, got {text!r}") from None
+        raise argparse.ArgumentTypeError(f"expected last, best, handover or an update number >= 0, got {text!r}") from None
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -79,8 +79,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--variant", default=None, help="variant label (default: the run's first)")
     p.add_argument("--seed", type=int, default=None, help="which trained seed (default: the run's first)")
     p.add_argument("--checkpoint", type=_which, default="last",
-                   help="last (default), best (the one at the variant's best seed-mean evaluation), or an update "
-                        "number (a checkpoint kept by --keep-checkpoints)")
+                   help="last (default), best (the one at the variant's best seed-mean evaluation), handover (where "
+                        "an online phase started), or an update number (a checkpoint kept by --keep-checkpoints)")
     p.add_argument("--episodes", type=positive_int, default=3, help="episodes to roll out (default %(default)s)")
     p.add_argument("--video", type=Path, default=None, help="write the episodes as a video (.mp4 or .gif)")
     p.add_argument("--max-frames", type=positive_int, default=None, help="stop recording after this many frames")

@@ -180,6 +180,16 @@ def test_a_run_killed_inside_the_online_phase_goes_on_from_its_last_checkpoint_e
     key = lambda r: (r["variant"], r["seed"], r["update"], r.get("env_steps"))  # noqa: E731
     curves = lambda out: sorted((key(r), r["score"], r.get("train_score")) for r in read_curves(out / "curves.csv"))  # noqa: E731
     assert curves(killed) == curves(full)
+    # the run replays from its config.json, and acts from the hand-over and from its last checkpoint
+    replay = tmp_path / "replay"
+    assert run_module("experiments.finetune", "--config", full, "--out", replay, "--no-progress").returncode == 0
+    assert curves(replay) == curves(full)
+    from offrl_jax.policy import load_policy
+
+    handover, last = load_policy(full, "pretrained", checkpoint="handover"), load_policy(full, "pretrained")
+    assert (handover.update, last.update) == (400, 400 + 900)
+    obs = np.zeros((3, 11), np.float32)
+    assert handover(obs).shape == last(obs).shape == (3, 3) and not np.allclose(handover(obs), last(obs))
 
 
 @pytest.mark.parametrize("args, fragment", [

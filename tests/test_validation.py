@@ -166,7 +166,7 @@ def test_study_stores_json_lists_as_tuples():
     ({"seed": 0.0}, "seed must be an integer (one of the run's seeds), not 0.0"),
     ({"seed": True}, "seed must be an integer (one of the run's seeds), not True"),
     ({"checkpoint": -1}, "checkpoint = -1 must be an update number >= 0"),
-    ({"checkpoint": "-1"}, "checkpoint must be 'last', 'best' or an update number, not '-1'"),
+    ({"checkpoint": "-1"}, "checkpoint must be 'last', 'best', 'handover' or an update number, not '-1'"),
 ])
 def test_load_policy_rejects_arguments(tmp_path, kw, message):
     with pytest.raises(ValueError) as err:
