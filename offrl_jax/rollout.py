@@ -70,7 +70,8 @@ def _which(text: str) -> str | int:
     try:
         return int_at_least(0)(text)
     except argparse.ArgumentTypeError:
-        raise argparse.ArgumentTypeError(f"expected last, best, handover or an update number >= 0, got {text!r}") from None
+        raise argparse.ArgumentTypeError(f"expected last, best, handover or an update number >= 0, got {text!r}"
+                                         ) from None
 
 
 def main(argv: list[str] | None = None) -> int:
