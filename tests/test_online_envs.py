@@ -145,3 +145,37 @@ def test_collected_blocks_fill_the_buffer_with_the_episodes_returns():
         offline = returns_to_go(rewards[m], terminals[m], np.zeros(200), 0.99)
         A(rows["returns"][:ends[-1] + 1], offline[:ends[-1] + 1], rtol=1e-5)
         assert not rows["returns"][ends[-1] + 1:].any()  # the pending rows: not yet known
+
+
+def test_saved_envs_step_on_exactly_as_the_envs_they_were_saved_from():
+    """Mid-episode (time limit 50, so episodes end on both sides of the save): the restored envs collect the same
+    block, episodes and all, as the envs that went on."""
+    make = lambda: gym.make("Hopper-v5", max_episode_steps=50)  # noqa: E731
+    envs = MemberEnvs("hopper", seeds=(0, 1), make=make)
+    blocks(envs, random_policy(2), 30, 1)
+    saved = envs.state()
+    went_on = blocks(envs, random_policy(2), 40, 2)
+    restored = MemberEnvs("hopper", seeds=(0, 1), make=make)
+    restored.restore(saved)
+    assert restored.step_count == 30
+    again = blocks(restored, random_policy(2), 40, 2)
+    for f in went_on[0]:
+        np.testing.assert_array_equal(again[0][f], went_on[0][f])
+    assert again[1] == went_on[1] and len(went_on[1]) >= 2
+
+
+def test_envs_that_are_not_mujoco_cannot_be_saved():
+    class Still(gym.Env):
+        observation_space = gym.spaces.Box(-1.0, 1.0, (11,))
+        action_space = gym.spaces.Box(-1.0, 1.0, (3,))
+
+        def reset(self, seed=None, options=None):
+            return np.zeros(11, np.float32), {}
+
+        def step(self, action):
+            return np.zeros(11, np.float32), 0.0, False, False, {}
+
+    if "OfflineRLStill-v0" not in gym.registry:
+        gym.register("OfflineRLStill-v0", entry_point=Still, max_episode_steps=5)
+    envs = MemberEnvs("hopper", seeds=(0,), make=lambda: gym.make("OfflineRLStill-v0"))
+    assert envs.state() is None
