@@ -13,6 +13,7 @@ runs=(
   results/figure2/halfcheetah-edac-gpu-150k
   results/figure2/walker2d-edac-gpu-150k
   results/figure2/hopper-edac
+  results/ablation/hopper-td3bc-v2
   results/ablation/hopper-td3bc-5seeds
   results/qtransformer/hopper-td3bc
   results/replay/hopper-medium-replay-td3bc
