@@ -148,7 +148,7 @@ def run_study(study: Study, out_dir: Path, dataset: Dataset, resume: bool = Fals
         plot_curves(out_dir / "curves.png", study, history, pretrain_ends, figure_lines(summary))
         if study.online is not None:
             plot_online(out_dir / "online.png", [v.label for v in study.variants], history, study.seeds,
-                        curves_title(study.name + " online", study.dataset, len(study.seeds)),
+                        curves_title(study.name, "online phase", len(study.seeds)),
                         behaviour_score(dataset))
     return summary
 
