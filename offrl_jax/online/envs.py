@@ -125,7 +125,9 @@ class MemberEnvs:
         """Continue from `state()` of envs of the same env name and seeds: every later step is what the saved envs
         would have stepped."""
         for env, physics, elapsed in zip(self.envs, state["physics"], state["elapsed"], strict=True):
-            mujoco.mj_setState(env.unwrapped.model, env.unwrapped.data, np.asarray(physics), SIM_STATE)
+            model, data = env.unwrapped.model, env.unwrapped.data
+            mujoco.mj_setState(model, data, np.asarray(physics), SIM_STATE)
+            mujoco.mj_forward(model, data)  # positions, contacts and forces derived from it, as after a step
             _time_limit(env)._elapsed_steps = int(elapsed)
         self.step_count = int(state["step_count"])
         self.episode_return = np.array(state["episode_return"], np.float64)

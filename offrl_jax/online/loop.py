@@ -16,6 +16,7 @@ step t fold_in(key(seed, EXPLORE), t), and every episode's reset its seed and st
 from __future__ import annotations
 
 import dataclasses
+import json
 import time
 from collections.abc import Callable, Iterator
 from typing import Any
@@ -95,7 +96,7 @@ def run_online(driver: Driver, algo: Any, online: OnlineConfig, env: str, form: 
         if saved is not None:
             buffer = serialization.from_state_dict(buffer, saved["buffer"])
             envs.restore(saved["envs"])
-            update = int(saved["update"])
+            update = int(json.loads(saved["key"])["update"])
         buffer = layout.place(buffer)
         explore = exploration_policy(algo.act, form.obs_mean, form.obs_std, cfg.explore_noise,
                                      getattr(algo, "explore", None))
@@ -121,7 +122,7 @@ def run_online(driver: Driver, algo: Any, online: OnlineConfig, env: str, form: 
             elapsed = time.perf_counter() - tic
             seconds += elapsed
             metrics = merge_metrics(parts) if parts else {"finite": np.ones(len(members), bool)}  # warm-up only
-            carry = lambda b=buffer, u=update: online_state(driver, b, envs, u)  # noqa: E731
+            carry = lambda b=buffer, u=update: online_state(driver, b, envs, u, offline_updates, online)  # noqa: E731
             yield Chunk("online", update, driver.real(states), metrics | train_metrics(episodes, len(members), env),
                         seconds, steps_done / elapsed, env_steps=envs.step_count, carry=carry)
             parts, episodes, steps_done, tic = [], [], 0, time.perf_counter()
@@ -129,12 +130,21 @@ def run_online(driver: Driver, algo: Any, online: OnlineConfig, env: str, form: 
         envs.close()
 
 
-def online_state(driver: Driver, buffer: OnlineBuffer, envs: MemberEnvs, update: int) -> dict | None:
+def online_state(driver: Driver, buffer: OnlineBuffer, envs: MemberEnvs, update: int, offline_updates: int,
+                 online: OnlineConfig) -> dict | None:
     """What going on from here needs besides the agent states (at an evaluation, where no training episode is
     pending in the measures): the update and env step, every env's state and the members' online buffers, as host
-    arrays.  None when the envs cannot be saved (not MuJoCo's): a resume then starts the phase again."""
+    arrays, with the offline updates and the online settings it belongs to (`online_state_key`).  None when the envs
+    cannot be saved (not MuJoCo's): a resume then starts the phase again."""
     saved = envs.state()
     if saved is None:
         return None
-    return {"update": int(update), "env_steps": int(envs.step_count), "envs": saved,
+    return {"key": online_state_key(update, envs.step_count, offline_updates, online), "envs": saved,
             "buffer": serialization.to_state_dict(to_host(driver.real(buffer)))}
+
+
+def online_state_key(update: int, env_steps: int, offline_updates: int, online: OnlineConfig) -> str:
+    """What an online state belongs to: the update and env step it was saved at, the offline phases' updates and the
+    online settings; a resume goes on from the state only where all of these are its own."""
+    return json.dumps({"update": int(update), "env_steps": int(env_steps), "offline_updates": int(offline_updates),
+                       "online": dataclasses.asdict(online)}, sort_keys=True)

@@ -52,21 +52,18 @@ def checkpoint_path(out_dir: Path, group: tuple[Variant, ...], which: str | int 
     return out_dir / "checkpoints" / (f"{labels}.msgpack" if which == "last" else f"{labels}.{int(which)}.msgpack")
 
 
-def save_online_state(path: Path, state: dict | None) -> None:
-    """Write the online phase's state (`offrl_jax.online.loop.online_state`) before the checkpoint it belongs to;
-    None (envs that cannot be saved) removes an older one, so a resume starts the phase again."""
-    if state is None:
-        path.unlink(missing_ok=True)
-    else:
-        atomic_write_bytes(path, serialization.msgpack_serialize(state))
+def save_online_state(path: Path, state: dict) -> None:
+    """Write the online phase's state (`offrl_jax.online.loop.online_state`), before the checkpoint it belongs to."""
+    atomic_write_bytes(path, serialization.msgpack_serialize(state))
 
 
-def load_online_state(path: Path, update: int, env_steps: int) -> dict | None:
-    """The online state saved with the checkpoint at (`update`, `env_steps`), or None: none saved, or one of
-    another point (a stop between the two writes), unreadable or incomplete."""
+def load_online_state(path: Path, key: str) -> dict | None:
+    """The online state saved with the checkpoint that `key` describes (`offrl_jax.online.loop.online_state_key`:
+    its update and env step, the offline updates and the online settings), or None: none saved, or one of another
+    point (a stop between the two writes, a budget changed since), unreadable or incomplete."""
     try:
         state = serialization.msgpack_restore(path.read_bytes())
-        return state if (int(state["update"]), int(state["env_steps"])) == (update, env_steps) else None
+        return state if state["key"] == key else None
     except Exception:  # noqa: BLE001  anything unreadable: the phase starts again, as with no file
         return None
 

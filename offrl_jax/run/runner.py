@@ -37,7 +37,7 @@ from offrl_jax.data.dataset import Dataset
 from offrl_jax.data.device import DeviceData, DeviceForms, device_data
 from offrl_jax.driver import Chunk, Driver
 from offrl_jax.envs.evaluate import evaluate_normalized, make_policy
-from offrl_jax.online.loop import run_online
+from offrl_jax.online.loop import online_state_key, run_online
 from offrl_jax.run.bc_level import figure_lines
 from offrl_jax.run.loggers import make_logger
 from offrl_jax.run.online_summary import plot_online
@@ -190,12 +190,14 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
     online_path, saved_online = checkpoint_path(out_dir, group, "online"), None
     if study.start_from is not None and not (resume and ckpt_path.exists()):  # a finished run's offline phases
         states, start, seconds, rows = start_from(study, group, data_sha256, driver.init(), last_update)
+        if writer:  # where this run's online phase starts, as a run that trained its offline phases keeps it
+            save_checkpoint(handover_path, states, start, seconds, rows, meta)
         record()
     elif resume and ckpt_path.exists():
         states, start, seconds, rows = load_checkpoint(ckpt_path, driver.init())
         env_steps = max((r.get("env_steps", 0) for r in rows), default=0)
         if online is not None and 0 < env_steps < online.steps:  # inside the online phase: it goes on exactly
-            saved_online = load_online_state(online_path, start, env_steps)
+            saved_online = load_online_state(online_path, online_state_key(start, env_steps, last_update, online))
             if saved_online is not None:
                 bar.write(f"{name}: the online phase goes on from env step {env_steps:,} (update {start})")
             else:  # no saved envs: it starts again from the hand-over, which it recomputes exactly (its randomness
@@ -281,9 +283,11 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
         if due or online_chunk or chunk.update == last_update or not ckpt_path.exists():
             carried = chunk.carry() if online_chunk and chunk.env_steps < online.steps else None  # every process
             if writer:
-                if online_chunk:  # first, so that a checkpoint never points at an older online state
+                if carried is not None:  # first, so that a checkpoint never points at an older online state
                     save_online_state(online_path, carried)
                 save_checkpoint(ckpt_path, host_states, chunk.update, chunk.seconds, rows, meta)
+                if online_chunk and carried is None:  # the phase's end, or envs that cannot be saved
+                    online_path.unlink(missing_ok=True)
                 if study.keep_checkpoints and not online_chunk:
                     _keep(out_dir, group, chunk.update, study.keep_checkpoints)
                 if online is not None and not online_chunk and chunk.update == last_update:
