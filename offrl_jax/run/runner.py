@@ -324,10 +324,10 @@ def _keep(out_dir: Path, group: tuple[Variant, ...], update: int, keep: int) -> 
 
 def _best_scores(rows: list[dict]) -> dict[str, float]:
     """Per variant, the best seed-mean score of its evaluations so far."""
-    by_eval: dict[tuple[str, int], list[float]] = {}
-    for r in rows:
+    by_eval: dict[tuple[str, int, int], list[float]] = {}  # an evaluation: its update and env step (the warm-up's
+    for r in rows:  # evaluations share the hand-over's update)
         if math.isfinite(r["score"]):
-            by_eval.setdefault((r["variant"], r["update"]), []).append(r["score"])
+            by_eval.setdefault((r["variant"], r["update"], r.get("env_steps") or 0), []).append(r["score"])
     best: dict[str, float] = {}
     for (label, _), scores in by_eval.items():
         best[label] = max(best.get(label, -math.inf), sum(scores) / len(scores))
