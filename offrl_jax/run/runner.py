@@ -329,7 +329,7 @@ def _best_scores(rows: list[dict]) -> dict[str, float]:
         if math.isfinite(r["score"]):
             by_eval.setdefault((r["variant"], r["update"], r.get("env_steps") or 0), []).append(r["score"])
     best: dict[str, float] = {}
-    for (label, _), scores in by_eval.items():
+    for (label, *_), scores in by_eval.items():
         best[label] = max(best.get(label, -math.inf), sum(scores) / len(scores))
     return best
 
