@@ -26,6 +26,7 @@ runs=(
   results/iql/figure2-hopper-beta1-5seeds
   results/iql/figure2-walker2d-5seeds
   results/iql/figure2-halfcheetah-5seeds
+  results/rebrac/figure2-hopper-v2-5seeds
   results/rebrac/figure2-hopper-5seeds
   results/rebrac/figure2-halfcheetah-5seeds
   results/rebrac/halfcheetah-beta0.01-3seeds
