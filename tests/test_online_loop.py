@@ -128,6 +128,15 @@ TINY = ["--env", "hopper", "--updates", "400", "--eval-every", "200", "--seeds",
         "--pretrain-updates", "200"]
 
 
+def rewind_to_first_online_checkpoint(path, update: int) -> None:
+    """Make a run's last checkpoint what a stop after its first online evaluation (env step 300) had left, without
+    the online state of that point (the phase then starts again from the hand-over)."""
+    payload = serialization.msgpack_restore(path.read_bytes())
+    payload["history"] = json.dumps([r for r in json.loads(payload["history"]) if r.get("env_steps", 0) <= 300])
+    payload["update"] = update
+    path.write_bytes(serialization.msgpack_serialize(payload))
+
+
 def test_finetune_runs_end_to_end_and_a_resume_inside_the_online_phase_recomputes_it(tmp_path):
     out = tmp_path / "run"
     done = run_module("experiments.finetune", *TINY, "--out", out)
@@ -144,11 +153,7 @@ def test_finetune_runs_end_to_end_and_a_resume_inside_the_online_phase_recompute
     assert [len(s["online"]["final"]["per_seed"]) for s in summary] == [2, 2]
     assert "Online phase (600 env steps per seed" in done.stdout and (out / "online.png").stat().st_size > 0
     # as if killed after the first online evaluation: the last checkpoint holds the rows up to env step 300
-    path = out / "checkpoints" / "pretrained.msgpack"
-    payload = serialization.msgpack_restore(path.read_bytes())
-    payload["history"] = json.dumps([r for r in json.loads(payload["history"]) if r.get("env_steps", 0) <= 300])
-    payload["update"] = 700
-    path.write_bytes(serialization.msgpack_serialize(payload))
+    rewind_to_first_online_checkpoint(out / "checkpoints" / "pretrained.msgpack", update=700)
     resumed = run_module("experiments.finetune", "--resume", out, "--no-progress", "--parallel", "1")
     assert resumed.returncode == 0, resumed.stderr
     assert "starts again from the hand-over" in resumed.stderr
@@ -288,11 +293,7 @@ def test_finetune_from_a_finished_offline_run_starts_at_its_checkpoint(tmp_path)
 
     assert load_policy(out, "pretrained", checkpoint="handover").update == 400
     # a resume from the first online checkpoint without its online state starts the phase again from there
-    path = out / "checkpoints" / "pretrained.msgpack"
-    payload = serialization.msgpack_restore(path.read_bytes())
-    payload["history"] = json.dumps([r for r in json.loads(payload["history"]) if r.get("env_steps", 0) <= 300])
-    payload["update"] = 700
-    path.write_bytes(serialization.msgpack_serialize(payload))
+    rewind_to_first_online_checkpoint(out / "checkpoints" / "pretrained.msgpack", update=700)
     resumed = run_module("experiments.finetune", "--resume", out, "--no-progress", "--parallel", "1")
     assert resumed.returncode == 0 and "starts again from the hand-over" in resumed.stderr, resumed.stderr
     no_time = lambda rows: [{k: v for k, v in r.items() if k != "seconds"} for r in rows]  # noqa: E731
