@@ -22,6 +22,7 @@ runs=(
   results/replay/halfcheetah-full-replay-td3bc
   results/replay/halfcheetah-full-replay-td3bc-lam0
   results/lambda/halfcheetah-td3bc
+  results/iql/figure2-hopper-v2-5seeds
   results/iql/figure2-hopper-5seeds
   results/iql/figure2-hopper-beta1-5seeds
   results/iql/figure2-walker2d-5seeds
