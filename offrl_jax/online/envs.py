@@ -108,18 +108,19 @@ class MemberEnvs:
         """Everything stepping on needs, as arrays (saved with an online checkpoint; `restore`): the env step, the
         episodes under way (return, length, the observation acted on next) and each env's exact simulator state
         (MuJoCo's integration state and the time limit's step count).  None for an env that is not MuJoCo's."""
-        physics = []
+        physics, elapsed = [], []
         for env in self.envs:
             model, data = (getattr(env.unwrapped, name, None) for name in ("model", "data"))
-            if not isinstance(data, mujoco.MjData) or _time_limit(env) is None:
+            limit = _time_limit(env)
+            if not isinstance(data, mujoco.MjData) or limit is None:
                 return None
             saved = np.empty(mujoco.mj_stateSize(model, SIM_STATE))
             mujoco.mj_getState(model, data, saved, SIM_STATE)
             physics.append(saved)
+            elapsed.append(limit._elapsed_steps)
         return {"step_count": np.int64(self.step_count), "episode_return": self.episode_return.copy(),
                 "episode_length": self.episode_length.copy(), "observations": self.observations.copy(),
-                "physics": np.stack(physics),
-                "elapsed": np.array([_time_limit(env)._elapsed_steps for env in self.envs], np.int64)}
+                "physics": np.stack(physics), "elapsed": np.array(elapsed, np.int64)}
 
     def restore(self, state: dict[str, np.ndarray]) -> None:
         """Continue from `state()` of envs of the same env name and seeds: every later step is what the saved envs
