@@ -4,8 +4,8 @@ phase of --online-steps env steps per seed in the same run, on the same member a
 Arms (--arms; each a variant, all with the same env steps and, but for online-rl, the same offline updates):
   pretrained      BC + MC critic pre-training, then offline RL, then online (the paper's method, continued)
   scratch         offline RL from scratch, then online
-  pretrain-only   pre-training for the whole offline budget, no offline RL, then online (imitate, then improve in
-                  the environment)
+  pretrain-only   pre-training for the whole offline budget (--pretrain-updates sets the other arms'), no
+                  offline RL, then online (imitate, then improve in the environment)
   online-rl       no offline phase: online RL from its initialisation with the dataset in its replay, the family
                   without its behaviour terms (TD3+BC's BC weight 0, ReBRAC's penalties 0; RLPD's recipe without
                   its ensemble): whether the offline phases were worth it
@@ -27,6 +27,7 @@ buffers restored exactly (checkpoints/<variant>.online.msgpack; docs/online.md).
     python -m experiments.finetune --env hopper --online-steps 2000 --online-block 500 --online-eval-every 1000 \\
         --updates 2000 --pretrain-updates 1000 --seeds 2 --max-transitions 20000          # a tiny run
     python -m experiments.finetune --algo rebrac --replay online-only --warmup-steps 5000   # WSRL's recipe
+    python -m experiments.finetune --algo rebrac --env door --level cloned     # CORL's door values (docs/online.md)
     python -m experiments.finetune --from runs/mujoco_medium/RUN --variant pretrained      # fine-tune a finished run
 """
 from __future__ import annotations
@@ -66,15 +67,16 @@ def build(args) -> Study:
     online = online_config(args)
     if args.arms is None:
         args.arms = [arm for arm in ARMS if arm != "online-rl" or args.algo in WITHOUT_BEHAVIOUR]
-    if "pretrain-only" in args.arms and getattr(args, "pretrain_updates", None):
-        raise UsageError("--pretrain-updates: the pretrain-only arm pre-trains for the whole offline budget "
-                         "(--updates); leave it out, or leave that arm out (--arms pretrained scratch)")
+    if "pretrain-only" in args.arms and "pretrain_auto" in (getattr(args, "pretrain_updates", None) or {}):
+        raise UsageError("--pretrain-updates auto: the pretrain-only arm pre-trains for the whole offline budget "
+                         "(--updates); give a number, or leave that arm out (--arms pretrained scratch)")
     if "online-rl" in args.arms and args.algo not in WITHOUT_BEHAVIOUR:
         raise UsageError(f"--arms online-rl: {args.algo} has no form without its behaviour terms (online-rl runs "
                          f"with --algo {', '.join(WITHOUT_BEHAVIOUR)}); leave that arm out")
-    own = {arm: ARMS[arm] | ({"pretrain_updates": args.updates} if arm == "pretrain-only" else {})
-           | (WITHOUT_BEHAVIOUR[args.algo] if arm == "online-rl" else {}) for arm in args.arms}
-    variants = tuple(v for arm in args.arms for v in study_variants(arm, args.algo, own[arm], args))
+    own = {arm: ARMS[arm] | (WITHOUT_BEHAVIOUR[args.algo] if arm == "online-rl" else {}) for arm in args.arms}
+    whole = {"pretrain_updates": args.updates}  # pretrain-only's, whatever --pretrain-updates gives the others
+    variants = tuple(v for arm in args.arms for v in study_variants(
+        arm, args.algo, own[arm], args, fixed=whole if arm == "pretrain-only" else None))
     return make_study(args.env, args.algo, args.level, args, extra={"online": online}, variants=variants,
                       reference="scratch" if "scratch" in args.arms else None)
 
@@ -122,7 +124,7 @@ def from_run(args, online: OnlineConfig) -> Study:
 
 def make_parser():
     p = parser("experiments.finetune", __doc__, updates=40_000, eval_every=2_500, seeds=5, eval_episodes=5,
-               omit=("pretrain",), default_preset="published", online=True)
+               omit=("pretrain",), default_preset="published", online=True, adroit=True)
     g = p.add_argument_group("online phase")
     g.add_argument("--arms", nargs="+", choices=tuple(ARMS), default=None,
                    help="the variants to compare (default: all four, or the first three for a family without an "

@@ -101,6 +101,20 @@ def test_dry_run_sources_name_each_layer():
     assert edac["num_critics"] == (10, "per-env") and edac["lam"] == (0.1, "per-env")
 
 
+def test_finetune_on_door_takes_corls_door_values_and_pretrain_only_keeps_the_whole_budget():
+    dry = run_module("experiments.finetune", "--dry-run", "--env", "door", "--algo", "rebrac",
+                     "--pretrain-updates", "3000", "--updates", "8000")
+    assert dry.returncode == 0, dry.stderr
+    arms = printed(dry.stdout)["door-human-rebrac"]  # --env door without --level: door-human
+    pretrained = arms["pretrained"]
+    assert pretrained["actor_beta"] == pretrained["critic_beta"] == (0.1, "per-env")
+    assert arms["pretrained"]["pretrain_updates"] == (3000, "flag")
+    assert arms["pretrain-only"]["pretrain_updates"] == (8000, "study")  # the flag sets the other arms'
+    cloned = printed(run_module("experiments.finetune", "--dry-run", "--env", "door", "--level", "cloned", "--algo",
+                                "iql", "--arms", "scratch").stdout)["door-cloned-iql"]["scratch"]
+    assert cloned["expectile"] == (0.8, "per-env")
+
+
 def test_dry_run_of_a_resume_shows_the_saved_run(tmp_path, datasets):
     out = tmp_path / "run"
     argv = [a.format(**datasets) for a in STUDIES["experiments.mujoco_medium"]]

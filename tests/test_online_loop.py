@@ -207,7 +207,8 @@ def test_a_run_killed_inside_the_online_phase_goes_on_from_its_last_checkpoint_e
     (["--online-mix", "1.5"], "online_mix"),
     (["--utd", "0"], "positive integer"),
     (["--algo", "bc"], "no offline-RL phase"),
-    (["--pretrain-updates", "100"], "pretrain-only"),
+    (["--pretrain-updates", "auto"], "pretrain-only"),
+    (["--env", "door", "--level", "medium"], "door's levels: human, cloned"),
     (["--replay", "sometimes"], "invalid choice"),
     (["--algo", "iql", "--arms", "online-rl"], "no form without its behaviour terms"),
 ])

@@ -120,9 +120,13 @@ ENV_DEFAULTS: dict[tuple[str, str], dict[str, Any]] = {
     ("rebrac", "hopper"): {"actor_beta": 0.01, "critic_beta": 0.01},
     ("rebrac", "halfcheetah"): {"actor_beta": 0.001, "critic_beta": 0.01},
     ("rebrac", "walker2d"): {"actor_beta": 0.05, "critic_beta": 0.1},
+    # door (CORL's configs/offline/rebrac/door/<level>_v1.yaml, the same in configs/finetune/rebrac/door/cloned_v1.yaml)
+    ("rebrac", "door"): {"actor_beta": 0.01, "critic_beta": 0.1, "actor_lr": 3e-4, "critic_lr": 3e-4},
+    ("rebrac", "door:human"): {"actor_beta": 0.1},
     # IQL (CORL's configs/offline/iql/<env>/medium_v2.yaml: expectile 0.7, beta 3 everywhere); hopper's also scales
     # the rewards by 1000 / (max - min episode return)
     ("iql", "hopper"): {"deterministic": True, "tau": 0.001, "normalize_reward": True},
+    ("iql", "door"): {"expectile": 0.8},  # configs/{offline,finetune}/iql/door/*_v1.yaml (no actor dropout here)
 }
 
 

@@ -191,7 +191,8 @@ def stage_phases(stages: list[Stage], updates: dict[str, UpdateFn],
 def split_budget(total: int, pretrain: int) -> tuple[int, int]:
     """(pre-training updates, RL updates): pre-training counts inside the total budget."""
     if pretrain > total:
-        raise ValueError(f"pre-training updates ({pretrain}) exceed the total budget ({total})")
+        raise ValueError(f"pre-training updates ({pretrain}) exceed the total budget ({total}): give fewer "
+                         "(--pretrain-updates) or more updates (--updates)")
     return pretrain, total - pretrain
 
 

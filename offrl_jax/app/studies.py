@@ -21,6 +21,7 @@ from offrl_jax.system.cli import OneLineParser, UsageError, positive_int
 
 ENVS = ("hopper", "halfcheetah", "walker2d")
 LEVELS = ("medium", "medium-replay", "full-replay", "medium-expert", "expert", "random")
+ADROIT_LEVELS = {"door": ("human", "cloned")}  # the Adroit datasets a study with `adroit=True` offers
 PRETRAIN = ("actor+critic", "actor", "critic", "none")
 LABELS = {"actor+critic": "pretrained", "none": "scratch", "actor": "actor-only", "critic": "critic-only"}
 
@@ -28,11 +29,12 @@ LABELS = {"actor+critic": "pretrained", "none": "scratch", "actor": "actor-only"
 def parser(prog: str, doc: str, updates: int = 100_000,
            eval_every: int = 5_000, env: str = "hopper", omit: tuple[str, ...] = (), preset: bool = False,
            seeds: int = 3, eval_episodes: int = 10, default_preset: str | None = None,
-           online: bool = False) -> argparse.ArgumentParser:
+           online: bool = False, adroit: bool = False) -> argparse.ArgumentParser:
     """The flags every MuJoCo study shares; studies pass their own defaults, leave out the flags they set
     themselves (`omit`: destinations, e.g. ("pretrain", "lam")), and only the main job has `--preset paper`
     (`preset`); `default_preset` names the config preset the study applies when no --preset is given; the config
-    fields only an online phase reads (`ONLINE_FIELDS`) are flags of a study with one (`online`).  Each
+    fields only an online phase reads (`ONLINE_FIELDS`) are flags of a study with one (`online`); a study with
+    `adroit` also takes door-human and door-cloned (`--env door --level human|cloned`; `check_level`).  Each
     hyper-parameter's stated default is the study's own, read from what it builds when its help is shown
     (`offrl_jax.app.dry_run.state_defaults`)."""
     p = OneLineParser(prog=prog, description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -42,9 +44,13 @@ def parser(prog: str, doc: str, updates: int = 100_000,
         if flag[2:].replace("-", "_") not in omit:
             group.add_argument(flag, **kw)
 
-    add("--env", choices=ENVS, default=env,
-        help="MuJoCo task: trains on <env>-<level> (or --dataset-path) and evaluates there (default %(default)s)")
-    add("--level", choices=LEVELS, default="medium", help="dataset level (default %(default)s)")
+    envs, levels = ENVS, LEVELS
+    if adroit:
+        envs, levels = envs + tuple(ADROIT_LEVELS), levels + tuple(dict.fromkeys(sum(ADROIT_LEVELS.values(), ())))
+    add("--env", choices=envs, default=env,
+        help="task: trains on <env>-<level> (or --dataset-path) and evaluates there (default %(default)s)")
+    add("--level", choices=levels, default="medium",
+        help="dataset level (default %(default)s" + ("; door: human, the default there, or cloned)" if adroit else ")"))
     add("--algo", choices=tuple(ALGOS), default="td3bc", help="(default %(default)s)")
     add("--pretrain", nargs="+", choices=PRETRAIN, default=["actor+critic", "none"],
         help="pre-training modes to compare, one variant each (default: actor+critic none)")
@@ -122,9 +128,11 @@ def sweep_variants(label: str, algo: str, fixed: dict, flags: frozenset[str] = f
                          tuple(flags)) for value in fixed[name])
 
 
-def study_variants(label: str, algo: str, own: dict, args) -> tuple[Variant, ...]:
-    """`sweep_variants` of the study's own values `own` under the flags given (`chosen(args)`, which win)."""
-    return sweep_variants(label, algo, own | chosen(args), frozenset(overrides(args)))
+def study_variants(label: str, algo: str, own: dict, args, fixed: dict | None = None) -> tuple[Variant, ...]:
+    """`sweep_variants` of the study's own values `own` under the flags given (`chosen(args)`, which win), and
+    `fixed`, values of the study's that no flag changes (they win over the flags)."""
+    fixed = fixed or {}
+    return sweep_variants(label, algo, own | chosen(args) | fixed, frozenset(overrides(args)) - fixed.keys())
 
 
 def pretrain_variants(algo: str, modes, args) -> tuple[Variant, ...]:
@@ -140,6 +148,7 @@ def make_study(env: str, algo: str, level: str, args, extra: dict | None = None,
     if args.dataset_path and "level" in getattr(args, "typed", ()):  # flags that would be ignored are refused
         raise UsageError("--level names a generated dataset (<env>-<level>), and --dataset-path gives the data: "
                          "leave one out")
+    level = check_level(env, level, args)
     dataset = args.dataset_path or f"{env}-{level}"
     data_name = dataset_label(args.dataset_path) if args.dataset_path else f"{env}-{level}"
     study = Study(name=name or f"{data_name}-{algo}", dataset=dataset, env=env, variants=variants,
@@ -150,6 +159,17 @@ def make_study(env: str, algo: str, level: str, args, extra: dict | None = None,
             raise UsageError(f"{', '.join('--' + f.replace('_', '-') for f in auto_only)} applies only to "
                              "--pretrain-updates auto[:CAP]; give that too, or leave it out")
     return study
+
+
+def check_level(env: str, level: str, args) -> str:
+    """The level of `env` the study trains on: `level`, or an Adroit env's first when --level was not given; an env
+    and level that name no dataset (door-medium, hopper-cloned) are refused."""
+    valid = ADROIT_LEVELS.get(env, LEVELS)
+    if env in ADROIT_LEVELS and "level" not in getattr(args, "typed", ()):
+        level = valid[0]
+    if level not in valid and not args.dataset_path:
+        raise UsageError(f"--env {env} --level {level}: there is no {env}-{level}; {env}'s levels: {', '.join(valid)}")
+    return level
 
 
 def dataset_label(dataset_path: str) -> str:
