@@ -235,6 +235,8 @@ class Chunk:
     env_steps: int | None = None  # the online phase: env steps every member has taken (updates_per_s: env steps/s)
     # the online phase: what a checkpoint saves to go on from here exactly (called before the phase goes on)
     carry: Callable[[], dict | None] | None = None
+    # the online phase: the env transitions of this chunk's env steps, raw, each (M, n, ...) (`online.record`)
+    transitions: dict[str, np.ndarray] | None = None
 
 
 def _swept_on_start(phase_for: Callable[[dict[str, jax.Array]], Phase]) -> Callable:

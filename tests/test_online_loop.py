@@ -190,6 +190,15 @@ def test_a_run_killed_inside_the_online_phase_goes_on_from_its_last_checkpoint_e
     key = lambda r: (r["variant"], r["seed"], r["update"], r.get("env_steps"))  # noqa: E731
     curves = lambda out: sorted((key(r), r["score"], r.get("train_score")) for r in read_curves(out / "curves.csv"))  # noqa: E731
     assert curves(killed) == curves(full)
+    # the online env steps recorded as datasets: the same rows as the uninterrupted run's, read as hopper data
+    from offrl_jax.data.readers import read_d4rl_hdf5
+
+    for seed in (0, 1):
+        name = f"online/hopper-pretrained-seed{seed}.hdf5"
+        mine, theirs = read_d4rl_hdf5(killed / name), read_d4rl_hdf5(full / name)
+        assert mine.env == "hopper" and len(mine.rewards) == 900
+        for field in ("observations", "actions", "rewards", "terminals", "timeouts", "next_observations"):
+            np.testing.assert_array_equal(getattr(mine, field), getattr(theirs, field))
     # the run replays from its config.json, and acts from the hand-over and from its last checkpoint
     replay = tmp_path / "replay"
     assert run_module("experiments.finetune", "--config", full, "--out", replay, "--no-progress").returncode == 0

@@ -183,7 +183,7 @@ def test_a_failed_run_leaves_no_folders_it_made_for_its_out(tmp_path):
 
 
 @pytest.mark.parametrize("extra", ["README.md", "notes.txt", "mydir/", "checkpoints/mine.txt",
-                                   "tensorboard/events.mine"])
+                                   "tensorboard/events.mine", "online/notes.txt"])
 def test_overwrite_of_a_run_refuses_files_no_run_writes(tmp_path, extra):
     """A saved run with a file the user put there (a README, notes, a folder) is not a run --overwrite may delete."""
     out = tmp_path / "run"
@@ -194,6 +194,13 @@ def test_overwrite_of_a_run_refuses_files_no_run_writes(tmp_path, extra):
         (out / extra).mkdir() if extra.endswith("/") else (out / extra).write_text("mine\n")
     line = refused(tmp_path, "experiments.mujoco_medium", "--out", out, "--overwrite", "--updates", "20000")
     assert f"holds {extra.rstrip('/')}, which a run does not write" in line, line
+
+
+def test_what_a_fine_tuning_run_writes_is_a_runs_own():
+    from offrl_jax.app.outputs import not_from_a_run
+
+    out = ROOT / "results" / "finetune" / "hopper-medium-v2-20k"
+    assert not_from_a_run(out, None) == ["README.md"]  # online.png is the run's; README.md was added by hand
 
 
 def test_what_a_killed_overwrite_left_aside_is_given_back_or_removed_and_left_alone_while_it_runs(tmp_path, capsys):

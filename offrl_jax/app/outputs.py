@@ -113,8 +113,9 @@ def check_resume_dir(path: Path) -> None:
 
 
 # what a run writes in its directory (offrl_jax/run/runner.py, offrl_jax/run/loggers.py, offrl_jax/system/checkpoint.py)
-RUN_FILES = frozenset({"config.json", "curves.csv", "curves.png", "summary.json", "wandb-run-id"})
+RUN_FILES = frozenset({"config.json", "curves.csv", "curves.png", "online.png", "summary.json", "wandb-run-id"})
 RUN_FOLDERS = {"checkpoints": lambda name: name.endswith(".msgpack"),  # <variant>[.best|.<update>].msgpack
+               "online": lambda name: name.endswith(".hdf5"),  # <env>-<variant>-seed<seed>.hdf5 (`online.record`)
                "tensorboard": lambda name: name.startswith("events.out.tfevents."),
                "wandb": None}  # wandb's own folder (`--logger wandb`), whatever it holds
 

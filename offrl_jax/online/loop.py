@@ -102,12 +102,13 @@ def run_online(driver: Driver, algo: Any, online: OnlineConfig, env: str, form: 
                                      getattr(algo, "explore", None))
         keys = exploration_keys(members)
         states = layout.place(states)
-        parts, episodes, steps_done = [], [], 0
+        parts, episodes, blocks, steps_done = [], [], [], 0
         tic = time.perf_counter()
         while envs.step_count < online.steps:
             acting = driver.real(states)
             block, ended = collect(envs, lambda obs, t, s=acting: explore(s, keys, obs, t), online.block)
             episodes += ended
+            blocks.append(block)
             rows = device_rows(block, form.obs_mean, form.obs_std, reward_scale)
             buffer = insert(buffer, layout.place(rows), donate=True)
             if envs.step_count > online.warmup:
@@ -123,9 +124,11 @@ def run_online(driver: Driver, algo: Any, online: OnlineConfig, env: str, form: 
             seconds += elapsed
             metrics = merge_metrics(parts) if parts else {"finite": np.ones(len(members), bool)}  # warm-up only
             carry = lambda b=buffer, u=update: online_state(driver, b, envs, u, offline_updates, online)  # noqa: E731
+            transitions = {f: np.concatenate([b[f] for b in blocks], axis=1) for f in blocks[0]}
             yield Chunk("online", update, driver.real(states), metrics | train_metrics(episodes, len(members), env),
-                        seconds, steps_done / elapsed, env_steps=envs.step_count, carry=carry)
-            parts, episodes, steps_done, tic = [], [], 0, time.perf_counter()
+                        seconds, steps_done / elapsed, env_steps=envs.step_count, carry=carry,
+                        transitions=transitions)
+            parts, episodes, blocks, steps_done, tic = [], [], [], 0, time.perf_counter()
     finally:
         envs.close()
 

@@ -38,6 +38,7 @@ from offrl_jax.data.device import DeviceData, DeviceForms, device_data
 from offrl_jax.driver import Chunk, Driver
 from offrl_jax.envs.evaluate import evaluate_normalized, make_policy
 from offrl_jax.online.loop import online_state_key, run_online
+from offrl_jax.online.record import record_chunk
 from offrl_jax.run.bc_level import figure_lines
 from offrl_jax.run.loggers import make_logger
 from offrl_jax.run.online_summary import plot_online
@@ -231,6 +232,7 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
     bar.status(f"{name} | compiling, then {min(study.eval_every, max(last_update - start, 1)):,} updates to the "
                "first evaluation")
     handover = {"states": states, "seconds": seconds}  # the offline phases' last states, where online starts
+    recording = True  # the online transitions go to online/*.hdf5 until a file cannot go on (`record_chunk`)
 
     def chunks():
         if last_update == 0 and not rows:  # no offline phase (an online-only arm): evaluate the initial policy
@@ -283,6 +285,12 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
         if due or online_chunk or chunk.update == last_update or not ckpt_path.exists():
             carried = chunk.carry() if online_chunk and chunk.env_steps < online.steps else None  # every process
             if writer:
+                if chunk.transitions is not None and recording:  # the online env steps as datasets
+                    failed = record_chunk(out_dir, study.env, [(v.label, s) for v, s in member_names],
+                                          chunk.env_steps, chunk.transitions)
+                    if failed:
+                        bar.write(failed, file=sys.stderr)
+                        recording = False
                 if carried is not None:  # first, so that a checkpoint never points at an older online state
                     save_online_state(online_path, carried)
                 save_checkpoint(ckpt_path, host_states, chunk.update, chunk.seconds, rows, meta)
