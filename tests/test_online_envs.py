@@ -147,18 +147,24 @@ def test_collected_blocks_fill_the_buffer_with_the_episodes_returns():
         assert not rows["returns"][ends[-1] + 1:].any()  # the pending rows: not yet known
 
 
-def test_saved_envs_step_on_exactly_as_the_envs_they_were_saved_from():
+@pytest.mark.parametrize("env", ["hopper", "door"])
+def test_saved_envs_step_on_exactly_as_the_envs_they_were_saved_from(env):
     """Mid-episode (time limit 50, so episodes end on both sides of the save): the restored envs collect the same
-    block, episodes and all, as the envs that went on."""
-    make = lambda: gym.make("Hopper-v5", max_episode_steps=50)  # noqa: E731
-    envs = MemberEnvs("hopper", seeds=(0, 1), make=make)
-    blocks(envs, random_policy(2), 30, 1)
+    block, episodes and all, as the envs that went on; door with its D4RL reward wrapper, as fine-tuning makes it."""
+    from offrl_jax.envs.adroit import with_original_reward
+    from offrl_jax.envs.registry import get_env_spec, make_env
+
+    make_env(env).close()  # registers the Adroit envs
+    spec = get_env_spec(env)
+    make = lambda: with_original_reward(gym.make(spec.gym_id, max_episode_steps=50))  # noqa: E731
+    envs = MemberEnvs(env, seeds=(0, 1), make=make)
+    blocks(envs, random_policy(2, spec.act_dim), 30, 1)
     saved = envs.state()
-    went_on = blocks(envs, random_policy(2), 40, 2)
-    restored = MemberEnvs("hopper", seeds=(0, 1), make=make)
+    went_on = blocks(envs, random_policy(2, spec.act_dim), 40, 2)
+    restored = MemberEnvs(env, seeds=(0, 1), make=make)
     restored.restore(saved)
     assert restored.step_count == 30
-    again = blocks(restored, random_policy(2), 40, 2)
+    again = blocks(restored, random_policy(2, spec.act_dim), 40, 2)
     for f in went_on[0]:
         np.testing.assert_array_equal(again[0][f], went_on[0][f])
     assert again[1] == went_on[1] and len(went_on[1]) >= 2
