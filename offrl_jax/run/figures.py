@@ -125,8 +125,8 @@ def plot_studies(study_dirs: list[Path], path: Path, reference: bool = True, ove
 
 def plot_online_studies(study_dirs: list[Path], path: Path, summaries: list[list[dict]] | None = None,
                         datasets: list[str | None] | None = None) -> list[Path]:
-    """One panel per run with an online phase, in a row: every variant's IQM score against online env steps from
-    its hand-over (`offrl_jax.run.online_summary.draw_online`), written to `path` as PNG and PDF."""
+    """One panel per run with an online phase, three to a row: every variant's IQM score against online env steps
+    from its hand-over (`offrl_jax.run.online_summary.draw_online`), written to `path` as PNG and PDF."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -138,8 +138,12 @@ def plot_online_studies(study_dirs: list[Path], path: Path, summaries: list[list
     if summaries is None:
         summaries = [json.loads((d / "summary.json").read_text()) for d in study_dirs]
     datasets = datasets or [None] * len(study_dirs)
-    fig, axes = plt.subplots(1, len(study_dirs), figsize=(5.6 * len(study_dirs), 4.0), squeeze=False)
-    for ax, study_dir, summary, dataset in zip(axes[0], study_dirs, summaries, datasets):
+    cols = min(3, len(study_dirs))
+    rows_of_panels = -(-len(study_dirs) // cols)
+    fig, axes = plt.subplots(rows_of_panels, cols, figsize=(5.6 * cols, 4.0 * rows_of_panels), squeeze=False)
+    for ax in axes.flat[len(study_dirs):]:
+        ax.set_visible(False)
+    for ax, study_dir, summary, dataset in zip(axes.flat, study_dirs, summaries, datasets):
         rows, seeds = read_curves(study_dir / "curves.csv"), tuple(summary[0]["seeds"])
         behaviour = next((s["behaviour_score"] for s in summary if s.get("behaviour_score") is not None), None)
         draw_online(ax, [s["variant"] for s in summary], rows, seeds, behaviour, fontsize=7)
