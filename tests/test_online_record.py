@@ -38,3 +38,13 @@ def test_a_file_that_cannot_go_on_gets_one_line_and_nothing_is_written(tmp_path)
     assert not (tmp_path / "online").exists()
     assert record_chunk(tmp_path, "hopper", [("scratch", 3)], 6, rows(1, 0, 6)) is None
     assert read_d4rl_hdf5(dataset_path(tmp_path, "hopper", "scratch", 3)).rewards.shape == (6,)
+
+
+def test_a_file_held_by_a_reader_stops_the_recording_with_one_line(tmp_path):
+    import h5py
+
+    assert record_chunk(tmp_path, "hopper", [("scratch", 0)], 6, rows(1, 0, 6)) is None
+    with h5py.File(dataset_path(tmp_path, "hopper", "scratch", 0), "r"):  # an offline run reading it meanwhile
+        message = record_chunk(tmp_path, "hopper", [("scratch", 0)], 12, rows(1, 6, 6))
+    assert message.startswith("online transitions not recorded: ") and "\n" not in message
+    assert read_d4rl_hdf5(dataset_path(tmp_path, "hopper", "scratch", 0)).rewards.shape == (6,)

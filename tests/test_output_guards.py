@@ -196,11 +196,14 @@ def test_overwrite_of_a_run_refuses_files_no_run_writes(tmp_path, extra):
     assert f"holds {extra.rstrip('/')}, which a run does not write" in line, line
 
 
-def test_what_a_fine_tuning_run_writes_is_a_runs_own():
+def test_what_a_fine_tuning_run_writes_is_a_runs_own(tmp_path):
     from offrl_jax.app.outputs import not_from_a_run
 
-    out = ROOT / "results" / "finetune" / "hopper-medium-v2-20k"
-    assert not_from_a_run(out, None) == ["README.md"]  # online.png is the run's; README.md was added by hand
+    for name in ("config.json", "curves.csv", "online.png", "checkpoints/pretrained.handover.msgpack",
+                 "online/hopper-pretrained-seed0.hdf5", "README.md"):
+        (tmp_path / name).parent.mkdir(exist_ok=True)
+        (tmp_path / name).write_text("x")
+    assert not_from_a_run(tmp_path, None) == ["README.md"]
 
 
 def test_what_a_killed_overwrite_left_aside_is_given_back_or_removed_and_left_alone_while_it_runs(tmp_path, capsys):

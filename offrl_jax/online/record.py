@@ -68,6 +68,6 @@ def record_chunk(out_dir: Path, env: str, members: Sequence[tuple[str, int]], en
     attrs = [{"env": env, "variant": label, "seed": seed} for label, seed in members]
     try:
         record(paths, end - rows["rewards"].shape[1], rows, attrs)
-    except ValueError as e:
+    except (ValueError, OSError) as e:  # OSError: a file another process holds, or one a kill left unreadable
         return f"online transitions not recorded: {e}"
     return None
