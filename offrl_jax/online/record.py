@@ -46,7 +46,7 @@ def record(paths: Sequence[Path], start: int, rows: dict[str, np.ndarray], attrs
                 for name in BLOCK_FIELDS:
                     shape = rows[name].shape[2:]
                     f.create_dataset(name, shape=(0, *shape), maxshape=(None, *shape), dtype=np.float32,
-                                     chunks=(max(1, min(n, 4096)), *shape))
+                                     chunks=(min(n, 4096), *shape))
                 f.attrs.update(attrs[m] if attrs else {})
             for name in BLOCK_FIELDS:
                 f[name].resize(start + n, axis=0)
@@ -59,6 +59,7 @@ def _rows_in(path: Path) -> int:
         return -1
     with h5py.File(path, "r") as f:
         return f["rewards"].shape[0] if "rewards" in f else 0
+
 
 def record_chunk(out_dir: Path, env: str, members: Sequence[tuple[str, int]], end: int,
                  rows: dict[str, np.ndarray]) -> str | None:
