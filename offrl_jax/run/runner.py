@@ -167,7 +167,7 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
     config = study.config(first_variant.label)
     algo = make_algorithm(config, ds.obs_dim, ds.act_dim, len(ds))
     data = data if data is not None else device_data(ds, config.gamma, normalize_reward=config.normalize_reward)
-    sweep = (swept, tuple(float(dict(v.overrides)[swept]) for v in group)) if swept else None
+    sweep = (swept, tuple(float(getattr(study.config(v.label), swept)) for v in group)) if swept else None
     driver = Driver(algo, data.arrays, seeds, study.batch_size, sweep=sweep)
     policy = make_policy(algo.act, data.obs_mean, data.obs_std)
     phases = algo.phases(config.budget(study.updates))
