@@ -10,7 +10,8 @@ import pytest
 
 from offrl_jax.data.generate import generate, shipped_policies
 from offrl_jax.data.generate.collect import POLICY_DIR, collect, load_policy, make_policy
-from offrl_jax.data.generate.sac import SACConfig, load_replay, make_sac, train
+from offrl_jax.data.generate.replay import load_replay
+from offrl_jax.data.generate.sac import SACConfig, make_sac, train
 
 needs_medium = pytest.mark.skipif("hopper-medium" not in shipped_policies(), reason="no shipped hopper-medium policy")
 

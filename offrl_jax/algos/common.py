@@ -9,7 +9,8 @@ Each `Phase.update(state, batch, key) -> (state, metrics)` is one scan body; bat
 k = `Phase.updates_per_call` minibatches (k = 2 for TD3's delayed actor update).  `single` / `first` hand a loss the
 (B, ...) minibatch.
 
-A minibatch (`Batch`: rows of a dataset's device form, `offrl_jax.data.device`, drawn uniformly, plus `idx`), for B rows:
+A minibatch (`Batch`: rows of a dataset's device form, `offrl_jax.data.device`, drawn uniformly, plus `idx`), for B
+rows:
     observations       (B, obs_dim)  normalised with the dataset mean / std
     actions            (B, act_dim)  in [-1, 1]
     rewards            (B,)

@@ -33,16 +33,19 @@ from offrl_jax.system.cli import (
     seed_int,
 )
 
+# the generated locomotion datasets: <env>-<level> for each env and level (the study flags offer them in this order)
+LOCOMOTION_ENVS = ("hopper", "halfcheetah", "walker2d")
 _LOCOMOTION_KINDS = {
-    "random": "uniformly random actions",
     "medium": "a policy at about 1/3 of expert return",
     "medium-replay": "the replay buffer of training up to the medium policy",
     "full-replay": "the whole replay buffer of the SAC run that trained the expert policy",
-    "expert": "the expert policy",
     "medium-expert": "medium and expert halves concatenated",
+    "expert": "the expert policy",
+    "random": "uniformly random actions",
 }
+LOCOMOTION_LEVELS = tuple(_LOCOMOTION_KINDS)
 KNOWN: dict[str, str] = {
-    **{f"{env}-{kind}": f"generated: {env}, {text}" for env in ("hopper", "halfcheetah", "walker2d")
+    **{f"{env}-{kind}": f"generated: {env}, {text}" for env in LOCOMOTION_ENVS
        for kind, text in _LOCOMOTION_KINDS.items()},
     "door-human": "shipped: 25 human demonstrations of Adroit door (6,729 transitions; DAPG, Apache-2.0)",
     "door-cloned": "generated: Adroit door, a behaviour-cloned policy mixed with the human demonstrations",

@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from offrl_jax.data.catalogue import LOCOMOTION_ENVS, LOCOMOTION_LEVELS
 from offrl_jax.data.dataset import Dataset, dataset_dir, is_current, split_version
 from offrl_jax.data.generate.collect import (
     MEDIUM_TARGET_SCORE,
@@ -47,8 +48,7 @@ from offrl_jax.envs.registry import get_env_spec
 from offrl_jax.system.cache import cache_dir
 from offrl_jax.system.checkpoint import atomic_write_text
 
-GEN_ENVS = ("hopper", "halfcheetah", "walker2d")
-LEVELS = ("random", "medium", "expert", "medium-expert", "medium-replay", "full-replay")
+GEN_ENVS, LEVELS = LOCOMOTION_ENVS, LOCOMOTION_LEVELS  # the catalogue's generated locomotion datasets
 DATASET_NAMES = tuple(f"{e}-{lvl}" for e in GEN_ENVS for lvl in LEVELS)
 DEFAULT_TRANSITIONS = 1_000_000
 
@@ -98,6 +98,7 @@ def _policy(env: str, level: str, version: int | None = None) -> tuple[Any, dict
 
 def _replay(env: str, level: str, n: int | None, progress: bool, run_dir: Path | None) -> tuple[Dataset, dict]:
     from offrl_jax.data.generate import sac
+    from offrl_jax.data.generate.replay import load_replay
 
     policy_level = "medium" if level == "medium-replay" else "expert"
     # the replay levels keep the SAC run and step of the first shipped checkpoints (version 0): a later medium
@@ -113,7 +114,7 @@ def _replay(env: str, level: str, n: int | None, progress: bool, run_dir: Path |
     if not (run_dir / "run.json").exists():
         print(f"[generate] no SAC run in {run_dir}: training {env} for {step} steps (seed {sac_seed})")
         sac.train(env, step, run_dir, seed=sac_seed, progress=progress)
-    data = sac.load_replay(run_dir, upto=step)
+    data = load_replay(run_dir, upto=step)
     if n is not None:
         data = {k: v[:n] for k, v in data.items()}
     if data["terminals"][-1] == 0:
@@ -254,7 +255,8 @@ def generate(name: str, transitions: int | None = None, out_dir: str | Path | No
 
     transitions: cap on the number of rows (default 1M per policy; the replay levels default to the whole run).
     out_dir: the dataset directory (default `dataset_dir(name)`: `cache_dir()/"datasets"/<name>-v<version>`); an
-        existing one raises unless overwrite, which replaces only a dataset directory written here (`check_replaceable`).
+        existing one raises unless overwrite, which replaces only a dataset directory written here
+        (`check_replaceable`).
     seed: env / action-noise seed of the rollouts.  sac_run: SAC run directory for the replay levels.
     demos: the human demonstrations door-cloned is made from (`offrl_jax.data.catalogue.load("door-human")`).
     shown_as: what the closing `[generate]` line names as the destination (default: the directory written).

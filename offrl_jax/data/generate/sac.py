@@ -35,7 +35,7 @@ import flax.serialization
 import numpy as np
 
 from offrl_jax.data.generate.collect import evaluate, make_gen_env
-from offrl_jax.data.generate.replay import ReplayBuffer, chunk_range, load_replay, reload_replay
+from offrl_jax.data.generate.replay import ReplayBuffer, chunk_range, reload_replay
 from offrl_jax.data.generate.sac_learner import (
     SACConfig,
     SACState,
