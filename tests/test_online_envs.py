@@ -99,6 +99,20 @@ def test_a_non_finite_observation_names_member_and_step():
         collect(envs, lambda obs, step: np.zeros((2, 3)), 10)
 
 
+def test_a_diverged_member_is_not_stepped_and_the_others_go_on():
+    healthy, mixed = MemberEnvs("hopper", seeds=(0, 1)), MemberEnvs("hopper", seeds=(0, 1))
+    start = mixed.observations.copy()
+    actions = lambda obs, step: np.full((2, 3), 0.3, np.float32)  # noqa: E731
+    nan_for_1 = lambda obs, step: np.array([[0.3] * 3, [np.nan] * 3], np.float32)  # noqa: E731
+    block, _ = collect(mixed, nan_for_1, 5)
+    expected, _ = collect(healthy, actions, 5)
+    for field in block:  # member 0 steps as if member 1 were healthy
+        np.testing.assert_array_equal(block[field][0], expected[field][0])
+    assert np.isnan(block["next_observations"][1]).all() and np.isnan(block["rewards"][1]).all()
+    assert (block["observations"][1] == start[1]).all() and not block["terminals"][1].any()
+    np.testing.assert_array_equal(mixed.observations[1], start[1])  # its env stayed where it was
+
+
 def test_bad_actions_and_block_sizes_are_refused():
     envs = MemberEnvs("hopper", seeds=(0, 1))
     with pytest.raises(ValueError, match=r"actions of shape \(2, 3\)"):

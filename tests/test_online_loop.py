@@ -7,6 +7,7 @@ import subprocess
 import sys
 import time
 
+import h5py
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -321,3 +322,18 @@ def test_the_online_rl_arm_has_no_offline_phase_and_no_behaviour_term(tmp_path):
     resolved = json.loads((out / "config.json").read_text())["resolved"]["online-rl"]
     assert (resolved["offline_updates"], resolved["bc_weight"], resolved["pretrain"]) == (0, 0.0, "none")
     assert (out / "checkpoints" / "online-rl.handover.msgpack").is_file()
+
+
+def test_a_member_that_diverges_online_is_left_out_and_the_others_finish(tmp_path):
+    out = tmp_path / "run"
+    argv = TINY[:TINY.index("--arms")]
+    done = run_module("experiments.finetune", *argv, "--arms", "online-rl", "--alpha", "2.5", "1e38", "--out", out)
+    assert done.returncode == 0, done.stderr  # the huge alpha's actor blows up at its first online updates
+    assert "diverged: td3bc" in done.stderr and "phase online" in done.stderr
+    summary = {s["variant"]: s for s in json.loads((out / "summary.json").read_text())}
+    assert summary["online-rl alpha=1e+38"]["seeds_diverged"] == [0, 1]
+    assert summary["online-rl alpha=2.5"]["seeds_diverged"] == []
+    assert all(x is not None for x in summary["online-rl alpha=2.5"]["online"]["final"]["per_seed"])
+    with h5py.File(out / "online" / "hopper-online-rl alpha=1e+38-seed0.hdf5") as f:  # not stepped once diverged
+        assert np.isnan(f["rewards"][300:]).all() and np.isfinite(f["rewards"][:300]).all()
+

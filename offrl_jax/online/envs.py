@@ -79,15 +79,22 @@ class MemberEnvs:
 
     def step(self, actions: np.ndarray) -> tuple[dict[str, np.ndarray], list[Episode]]:
         """Step every env with its action ((S, act_dim)): (the transitions, `BLOCK_FIELDS` each (S, ...), float32;
-        the episodes they ended).  Envs whose episode ended are reset, their next `observations` the reset's."""
+        the episodes they ended).  Envs whose episode ended are reset, their next `observations` the reset's.
+
+        A member whose action is not finite (its networks diverged; the runner has left it out) is not stepped: its
+        env stays where it is, and its row has NaN next observation and reward, as its scores are NaN."""
         actions = np.asarray(actions, np.float32)
         if actions.shape != (len(self.envs), self.act_dim):
             raise ValueError(f"expected actions of shape {(len(self.envs), self.act_dim)}, got {actions.shape}")
         out = {"observations": self.observations.copy(), "actions": actions,
                "next_observations": np.zeros_like(self.observations), "rewards": np.zeros(len(self.envs), np.float32),
                "terminals": np.zeros(len(self.envs), np.float32), "timeouts": np.zeros(len(self.envs), np.float32)}
+        diverged = ~np.all(np.isfinite(actions), axis=1)
+        out["next_observations"][diverged], out["rewards"][diverged] = np.nan, np.nan
         ended = []
         for m, env in enumerate(self.envs):
+            if diverged[m]:
+                continue
             obs, reward, terminated, truncated, _ = env.step(actions[m])
             self._check(m, obs, reward, "step")
             out["next_observations"][m], out["rewards"][m] = obs, reward
@@ -99,7 +106,7 @@ class MemberEnvs:
                                      self.step_count + 1))
                 self.episode_return[m], self.episode_length[m] = 0.0, 0
         self.step_count += 1
-        self.observations = out["next_observations"].copy()
+        self.observations = np.where(diverged[:, None], self.observations, out["next_observations"])
         for episode in ended:
             self.observations[episode.member] = self._reset(episode.member)
         return out, ended
