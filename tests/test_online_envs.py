@@ -110,6 +110,7 @@ def test_a_diverged_member_is_not_stepped_and_the_others_go_on():
         np.testing.assert_array_equal(block[field][0], expected[field][0])
     assert np.isnan(block["next_observations"][1]).all() and np.isnan(block["rewards"][1]).all()
     assert (block["observations"][1] == start[1]).all() and not block["terminals"][1].any()
+    assert block["timeouts"][1].all()  # nothing of it is under way: its buffer waits for no episode's end
     np.testing.assert_array_equal(mixed.observations[1], start[1])  # its env stayed where it was
 
 

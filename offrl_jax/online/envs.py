@@ -82,7 +82,8 @@ class MemberEnvs:
         the episodes they ended).  Envs whose episode ended are reset, their next `observations` the reset's.
 
         A member whose action is not finite (its networks diverged; the runner has left it out) is not stepped: its
-        env stays where it is, and its row has NaN next observation and reward, as its scores are NaN."""
+        env stays where it is, and its row has NaN next observation and reward, as its scores are NaN, and a time-out
+        (nothing of it is under way: its online buffer waits for no episode end)."""
         actions = np.asarray(actions, np.float32)
         if actions.shape != (len(self.envs), self.act_dim):
             raise ValueError(f"expected actions of shape {(len(self.envs), self.act_dim)}, got {actions.shape}")
@@ -90,7 +91,7 @@ class MemberEnvs:
                "next_observations": np.zeros_like(self.observations), "rewards": np.zeros(len(self.envs), np.float32),
                "terminals": np.zeros(len(self.envs), np.float32), "timeouts": np.zeros(len(self.envs), np.float32)}
         diverged = ~np.all(np.isfinite(actions), axis=1)
-        out["next_observations"][diverged], out["rewards"][diverged] = np.nan, np.nan
+        out["next_observations"][diverged], out["rewards"][diverged], out["timeouts"][diverged] = np.nan, np.nan, 1.0
         ended = []
         for m, env in enumerate(self.envs):
             if diverged[m]:

@@ -9,7 +9,7 @@ Rows are appended at every online evaluation, before the checkpoint.  A resumed 
 step it goes on from (a stop between the two writes leaves rows the checkpoint does not know), so the files always
 equal an uninterrupted run's.  The last episode of a file may be unfinished (no terminal or time-out on its last row),
 as in D4RL's own files.  A member that diverged is not stepped after it (`MemberEnvs.step`): its rows from there on
-have NaN next observations and rewards, which a reader refuses.
+have NaN next observations and rewards (and a time-out each), which a reader refuses.
 """
 from __future__ import annotations
 
