@@ -139,6 +139,26 @@ def test_ninety_percent_of_a_negative_asymptote_lies_below_it():
     assert by["90% of asymptote"]["score"] == -11.0 and by["90% of asymptote"]["updates"] == [1000]
 
 
+@pytest.mark.parametrize("censored, reference_censored, low, high, text, verdict_", [
+    (0, 0, 1.5, 3.0, "2.00x [1.50, 3.00]", "holds"),
+    (0, 2, 1.5, 3.0, "≥ 2.00x [1.50, 3.00]", "holds"),  # the reference's true updates are more: only larger
+    (0, 2, 0.5, 0.9, "≥ 2.00x [0.50, 0.90]", "undecided: censored seeds bound the ratio from one side only"),
+    (2, 0, 1.5, 3.0, "≤ 2.00x [1.50, 3.00]", "undecided: censored seeds bound the ratio from one side only"),
+    (2, 0, 0.5, 0.9, "≤ 2.00x [0.50, 0.90]", "does not hold"),  # only smaller than an interval below 1
+    (2, 3, 1.5, 3.0, "2.00x [1.50, 3.00] (both censored)", "undecided: both arms have censored seeds"),
+    (5, 5, 1.0, 1.0, "2.00x [1.00, 1.00] (both censored)", "undecided: neither arm reaches the threshold"),
+])
+def test_a_speedup_with_censored_seeds_is_a_bound_only_where_one_arm_has_them(censored, reference_censored, low,
+                                                                              high, text, verdict_):
+    from offrl_jax.run.bc_level import ratio_text
+    from offrl_jax.run.summary import verdict
+
+    estimate = {"value": 2.0, "low": low, "high": high}
+    assert ratio_text(estimate, censored, reference_censored) == text
+    speedup = {"updates": estimate, "censored": censored, "reference_censored": reference_censored}
+    assert verdict(speedup, seeds=5) == verdict_
+
+
 def test_the_table_shows_every_seed_and_marks_censored_seeds_and_lower_bounds():
     from offrl_jax.run.summary import summary_table
 

@@ -66,8 +66,8 @@ def aggregate_table(result: dict) -> str:
 
 def claims_table(summaries: list[list[dict]], names: list[str]) -> str:
     """One row per comparison of every study (`names`: how to call each): seeds, the headline threshold, the
-    speed-up with its interval (≥: the reference has censored seeds), the probability of improvement of the
-    final score, the verdict, and the BC level with the speed-ups to the BC-relative thresholds
+    speed-up with its interval (`bc_level.ratio_text`: ≥, ≤ or no bound for censored seeds), the probability of
+    improvement of the final score, the verdict, and the BC level with the speed-ups to the BC-relative thresholds
     (`bc_level.claim_cells`); a speed-up whose threshold the BC actor reached is flagged."""
     lines = ["| study | variant vs reference | seeds | headline threshold | speed-up (updates) | P(final better) | "
              "fewer updates? | BC level (seed mean) | speed-up to BC + 50 % to best | speed-up to BC + 90 % to best |",

@@ -195,10 +195,18 @@ CLAIMS_NOTE = ("BC level: the comparison's BC level, mean over seeds (whose: a B
                "the BC actor's.")
 
 
+def ratio_text(estimate: dict | None, censored: int, reference_censored: int) -> str:
+    """A speed-up (reference / this variant, a censored seed counted at the budget) as '≥ 4.21x [2.67, 8.00]': '≥'
+    where only the reference has censored seeds (its true updates are more: the ratio can only be larger), '≤' where
+    only this variant has (only smaller), '(both censored)' where both have (no bound either way)."""
+    text = stats.Estimate.from_json(estimate).text(".2f", "x") if estimate else "n/a"
+    if text == "n/a" or not (censored or reference_censored):
+        return text
+    return text + " (both censored)" if censored and reference_censored else ("≤ " if censored else "≥ ") + text
+
+
 def speedup_text(x: dict) -> str:
-    """A speed-up entry of `compare` as '≥ 4.21x [2.67, 8.00] (5 of 5 by the BC actor)'."""
-    ratio = stats.Estimate.from_json(x["updates"]).text(".2f", "x")
-    if x.get("reference_censored") and ratio != "n/a":
-        ratio = "≥ " + ratio
+    """A speed-up entry of `compare` as '≥ 4.21x [2.67, 8.00] (5 of 5 by the BC actor)' (`ratio_text`)."""
+    ratio = ratio_text(x["updates"], x.get("censored", 0), x.get("reference_censored", 0))
     hits = x.get("by_bc_actor")
     return ratio + (f" ({hits} of {x['seeds']} by the BC actor)" if hits else "")

@@ -185,21 +185,27 @@ def compare(mine: dict, ref: dict) -> dict:
 def verdict(speedup: dict | None, seeds: int) -> str:
     """Whether a variant reaches the headline threshold in fewer updates than its reference (for pre-training
     against from scratch: the paper's claim): 'holds' when the speed-up's interval lies above 1, 'does not hold'
-    when it lies at or below 1, else 'undecided: <why>'."""
+    when it lies at or below 1, else 'undecided: <why>'.  A censored seed counts at the budget, so the ratio is a
+    lower bound where only the reference has censored seeds (it may hold, never fail), an upper bound where only
+    the variant has (it may fail, never hold), and neither where both have (undecided)."""
     if speedup is None:
         return "undecided: no threshold"
     if seeds < 2:
         return "undecided: one seed, no interval"
     ratio = stats.Estimate.from_json(speedup["updates"])
-    if speedup["censored"] == speedup["reference_censored"] == seeds:
+    mine, ref = speedup["censored"], speedup["reference_censored"]
+    if mine == ref == seeds:
         return "undecided: neither arm reaches the threshold"
+    if mine and ref:
+        return "undecided: both arms have censored seeds"
     if ratio.low is None or ratio.high is None:
         return "undecided"
-    if ratio.low > 1:
+    if ratio.low > 1 and not mine:
         return "holds"
-    if ratio.high <= 1:
+    if ratio.high <= 1 and not ref:
         return "does not hold"
-    return "undecided: the interval holds 1"
+    return ("undecided: the interval holds 1" if ratio.low <= 1 < ratio.high else
+            "undecided: censored seeds bound the ratio from one side only")
 
 
 VERDICT_WORDS = {"holds": "yes (the speed-up's interval lies above 1)",
@@ -231,11 +237,6 @@ def _per_seed(reach: dict) -> str:
     return " ".join(cells) + (f" ({sum(reach['censored'])} censored)" if any(reach["censored"]) else "")
 
 
-def _speedup(d: dict, censored_reference: bool) -> str:
-    text = _est(d, ".2f", "x")
-    return ("≥ " + text) if censored_reference and text != "n/a" else text
-
-
 def summary_table(summary: list[dict]) -> str:
     """The printed result of a study: per variant its final, last and over-the-run scores (IQM [95 % CI] over
     seeds), and per variant compared with its reference the updates to each threshold per seed and the speed-up."""
@@ -265,8 +266,9 @@ def summary_table(summary: list[dict]) -> str:
         trend = ref.get("asymptote_trend")
         lines += ["", f"{s['variant']} vs {ref['variant']}: updates to each threshold per seed (pre-training "
                       f"included; a censored seed never reached it and counts at the budget); speed-up = mean "
-                      f"updates of {ref['variant']} / of {s['variant']} [95 % CI]; ≥ where {ref['variant']} has "
-                      f"censored seeds{bc_level.threshold_note(s)}. "
+                      f"updates of {ref['variant']} / of {s['variant']} [95 % CI]; ≥ where only {ref['variant']} has "
+                      f"censored seeds, ≤ where only {s['variant']} has, no bound where both have"
+                      f"{bc_level.threshold_note(s)}. "
                       f"{ref['variant']}'s final "
                       + (f"{ref['final_score_mean']:.1f}" if _known(ref["final_score_mean"]) else "n/a")
                       + (f", its trend {_est(trend, '+.1f')} over the last 20 % of evaluations: "
@@ -280,8 +282,8 @@ def summary_table(summary: list[dict]) -> str:
             mark = " (headline)" if sp["threshold"] == vs["headline"] else ""
             lines.append(f"| {sp['threshold']}{mark} | {sp['score']:.1f} | {_per_seed(a)}{bc_level.flag(a)} | "
                          f"{_per_seed(b)}{bc_level.flag(b)} | "
-                         f"{_speedup(sp['updates'], sp['reference_censored'] > 0)} | "
-                         f"{_speedup(sp['seconds'], sp['reference_censored'] > 0)} |")
+                         f"{bc_level.ratio_text(sp['updates'], sp['censored'], sp['reference_censored'])} | "
+                         f"{bc_level.ratio_text(sp['seconds'], sp['censored'], sp['reference_censored'])} |")
         lines += ["", f"Probability that {s['variant']} beats {ref['variant']}: final score "
                       f"{_est(vs['poi_final'], '.2f')}, mean over the run {_est(vs['poi_auc'], '.2f')}. "
                       f"{s['variant']} needs fewer updates than {ref['variant']} to reach "
