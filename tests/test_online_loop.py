@@ -252,8 +252,16 @@ def test_online_measures_by_hand():
     assert a["final"]["per_seed"] == [60.0, 70.0] and a["gain"]["per_seed"] == [20.0, 40.0]
     np.testing.assert_allclose(a["train_score"]["per_seed"], [(20 + 90) / 4, (30 + 50 + 40) / 6])
     behaviour, best = a["reach"]
-    assert behaviour["env_steps"] == [1000, 200] and behaviour["censored"] == [False, False]
+    # seed 0 hands over at 40, above the behaviour's 36: there at env step 0 (then 35 and 30 online, 60 at 1000)
+    assert behaviour["env_steps"] == [0, 200] and behaviour["censored"] == [False, False]
     assert best["score"] == pytest.approx(0.9 * 65.0) and best["env_steps"] == [1000, 1000]
+    # a negative best: 90 % of it lies below it (-11 for -10), which the best variant reaches
+    negative = [{"variant": "a", "seed": s, "phase": "offline_rl", "update": 50, "score": -20.0} for s in (0, 1)]
+    negative += [{"variant": "a", "seed": s, "phase": "online", "update": 150, "score": -12.0, "env_steps": 100}
+                 for s in (0, 1)]
+    (a,) = summarize_online(negative, ["a"], (0, 1), 100)
+    (best,) = a["reach"]
+    assert best["score"] == pytest.approx(-13.2) and best["env_steps"] == [100, 100] and not any(best["censored"])
 
 
 def test_warm_up_evaluations_keep_the_hand_over_on_the_update_axis():

@@ -129,7 +129,7 @@ def test_ninety_percent_of_a_negative_asymptote_lies_below_it():
                   variants=(Variant.of("pre", "td3bc", pretrain_updates=1000),
                             Variant.of("scratch", "td3bc", pretrain="none")),
                   reference="scratch")
-    from offrl_jax.run.summary import fraction_of
+    from offrl_jax.run.stats import fraction_of
 
     assert fraction_of(-10.0, 0.9) == -11.0 and fraction_of(10.0, 0.9) == 9.0
     rows = rows_of("pre", [[-11.0, -10.5, -10.5]]) + rows_of("scratch", [[-20.0, -10.0, -10.0]])

@@ -7,8 +7,9 @@
     gain          final minus hand-over
     train score   the mean D4RL score of the training episodes over the whole online phase (the regret analogue:
                   what acting while learning scored), each evaluation interval weighted by its episodes
-    env steps to  the behaviour score, and to 90 % of the best seed-mean online evaluation of any variant; a seed
-                  that never gets there is censored at the online budget (the mean is then a lower bound, "≥")
+    env steps to  the behaviour score, and to 90 % of the best seed-mean online evaluation of any variant (below it
+                  where that is negative); a seed there at the hand-over counts 0, one that never gets there is
+                  censored at the online budget (the mean is then a lower bound, "≥")
 
 Rows are curves.csv's (`offrl_jax.run.results.read_curves`): online ones have phase "online" and `env_steps`.
 """
@@ -55,7 +56,7 @@ def summarize_online(rows: list[dict], labels: list[str], seeds: tuple[int, ...]
         means = [np.nanmean(c["scores"], axis=0) for c in curves.values()]
         best = max((float(np.nanmax(m)) for m in means if np.isfinite(m).any()), default=None)
         thresholds = ([("behaviour data", behaviour)] if behaviour is not None else []) + (
-            [(f"{BEST_FRACTION:.0%} of best", BEST_FRACTION * best)] if best is not None else [])
+            [(f"{BEST_FRACTION:.0%} of best", stats.fraction_of(best, BEST_FRACTION))] if best is not None else [])
         out = []
         for label, c in curves.items():
             steps, scores = c["env_steps"], c["scores"]
@@ -70,8 +71,9 @@ def summarize_online(rows: list[dict], labels: list[str], seeds: tuple[int, ...]
                 entry[name] = {"per_seed": [float(x) for x in values],
                                "iqm": stats.interval([values], stats.iqm).to_json()}
             entry["reach"] = []
+            from_handover = np.concatenate([c["handover"][:, None], scores], axis=1)  # the hand-over: env step 0
             for name, score in thresholds:
-                reach, censored = stats.first_reach(steps, scores, score)
+                reach, censored = stats.first_reach(np.concatenate([[0], steps]), from_handover, score)
                 reach = np.where(censored, online_steps, reach)
                 entry["reach"].append({"threshold": name, "score": float(score), "env_steps": reach.tolist(),
                                        "censored": censored.tolist(),

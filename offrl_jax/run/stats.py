@@ -92,6 +92,11 @@ def interval(samples: Sequence[np.ndarray], statistic: Callable[..., np.ndarray]
     return Estimate(value, low if math.isfinite(low) else None, high if math.isfinite(high) else None)
 
 
+def fraction_of(score: float, f: float) -> float:
+    """f of a score, below it for a negative score too (90 % of -10 is -11): score - (1 - f) |score|."""
+    return score - (1 - f) * abs(score)
+
+
 def first_reach(updates: np.ndarray, scores: np.ndarray, threshold: float) -> tuple[np.ndarray, np.ndarray]:
     """(reach (S,), censored (S,)): per seed the first of `updates` (E,) at which `scores` (S, E) is at or above
     `threshold`; a seed that never is (or diverged first: NaN) is censored at the last update."""

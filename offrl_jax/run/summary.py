@@ -42,11 +42,6 @@ from offrl_jax.system.checkpoint import atomic_write_text
 FRACTIONS = (0.8, 0.9, 0.95)
 
 
-def fraction_of(score: float, f: float) -> float:
-    """f of a score, below it for a negative score too (90 % of -10 is -11): score - (1 - f) |score|."""
-    return score - (1 - f) * abs(score)
-
-
 def final_scores(study: Study, updates: np.ndarray, scores: np.ndarray) -> np.ndarray:
     """Per seed, the mean of its evaluations in `final_window`, or of the last 10 % of them; NaN for a seed that
     diverged before or inside the window (not the mean of its evaluations before it diverged)."""
@@ -100,8 +95,8 @@ def _summarize(study: Study, rows: list[dict], pretrain_ends: dict[str, int], be
         asymptote = float(np.nanmean(finals[reference])) if ref_curve is not None else float("nan")
         trend, flat = stats.trend_is_flat(ref_curve) if ref_curve is not None else (None, False)
         thresholds = ([("behaviour data", behaviour)] if behaviour is not None else []) + [
-            (f"{f:.0%} of best", fraction_of(best, f)) for f in FRACTIONS if best is not None] + [
-            (f"{f:.0%} of asymptote", fraction_of(asymptote, f)) for f in FRACTIONS if flat] + (
+            (f"{f:.0%} of best", stats.fraction_of(best, f)) for f in FRACTIONS if best is not None] + [
+            (f"{f:.0%} of asymptote", stats.fraction_of(asymptote, f)) for f in FRACTIONS if flat] + (
             bc_level.thresholds(shared.get(v.label), best))
         config = study.config(v.label)
         mean_curve = np.nanmean(scores, axis=0) if len(updates) else np.array([np.nan])
