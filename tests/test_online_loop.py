@@ -330,6 +330,10 @@ def test_the_online_rl_arm_has_no_offline_phase_and_no_behaviour_term(tmp_path):
     resolved = json.loads((out / "config.json").read_text())["resolved"]["online-rl"]
     assert (resolved["offline_updates"], resolved["bc_weight"], resolved["pretrain"]) == (0, 0.0, "none")
     assert (out / "checkpoints" / "online-rl.handover.msgpack").is_file()
+    before = (out / "config.json").read_text()
+    longer = run_module("experiments.finetune", "--resume", out, "--updates", "800", "--no-progress")
+    assert longer.returncode == 2 and "cannot be extended on resume" in longer.stderr.strip().splitlines()[-1]
+    assert (out / "config.json").read_text() == before  # nothing rewritten with a budget it never trained
 
 
 def test_a_member_that_diverges_online_is_left_out_and_the_others_finish(tmp_path):

@@ -84,6 +84,9 @@ def extend(saved: Study | list[Study], updates: int) -> Study | list[Study]:
     if any(updates < s.updates for s in studies):
         raise UsageError(f"--updates {updates:,} is less than the saved run's {max(s.updates for s in studies):,}; "
                          "a resumed run can be extended, not shortened")
+    if updates != max(s.updates for s in studies) and any(s.online is not None for s in studies):
+        raise UsageError("--updates: the saved run fine-tunes online after its offline updates, so they cannot be "
+                         "extended on resume; start a new run (or finetune --from a longer offline run)")
     longer = [dataclasses.replace(s, updates=updates) for s in studies]
     return longer if isinstance(saved, list) else longer[0]
 
