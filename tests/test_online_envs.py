@@ -162,10 +162,11 @@ def test_collected_blocks_fill_the_buffer_with_the_episodes_returns():
         assert not rows["returns"][ends[-1] + 1:].any()  # the pending rows: not yet known
 
 
-@pytest.mark.parametrize("env", ["hopper", "door"])
-def test_saved_envs_step_on_exactly_as_the_envs_they_were_saved_from(env):
+@pytest.mark.parametrize("env, save_at", [("hopper", 30), ("door", 30), ("door", 100)])
+def test_saved_envs_step_on_exactly_as_the_envs_they_were_saved_from(env, save_at):
     """Mid-episode (time limit 50, so episodes end on both sides of the save): the restored envs collect the same
-    block, episodes and all, as the envs that went on; door with its D4RL reward wrapper, as fine-tuning makes it."""
+    block, episodes and all, as the envs that went on; door with its D4RL reward wrapper, as fine-tuning makes it,
+    saved in its first episode and after two resets (each places the door anew: a model field, not the state)."""
     from offrl_jax.envs.adroit import with_original_reward
     from offrl_jax.envs.registry import get_env_spec, make_env
 
@@ -173,12 +174,12 @@ def test_saved_envs_step_on_exactly_as_the_envs_they_were_saved_from(env):
     spec = get_env_spec(env)
     make = lambda: with_original_reward(gym.make(spec.gym_id, max_episode_steps=50))  # noqa: E731
     envs = MemberEnvs(env, seeds=(0, 1), make=make)
-    blocks(envs, random_policy(2, spec.act_dim), 30, 1)
+    blocks(envs, random_policy(2, spec.act_dim), save_at, 1)
     saved = envs.state()
     went_on = blocks(envs, random_policy(2, spec.act_dim), 40, 2)
     restored = MemberEnvs(env, seeds=(0, 1), make=make)
     restored.restore(saved)
-    assert restored.step_count == 30
+    assert restored.step_count == save_at
     again = blocks(restored, random_policy(2, spec.act_dim), 40, 2)
     for f in went_on[0]:
         np.testing.assert_array_equal(again[0][f], went_on[0][f])

@@ -115,8 +115,9 @@ class MemberEnvs:
     def state(self) -> dict[str, np.ndarray] | None:
         """Everything stepping on needs, as arrays (saved with an online checkpoint; `restore`): the env step, the
         episodes under way (return, length, the observation acted on next) and each env's exact simulator state
-        (MuJoCo's integration state and the time limit's step count).  None for an env that is not MuJoCo's."""
-        physics, elapsed = [], []
+        (MuJoCo's integration state, the model fields a reset may place anew, `RESET_FIELDS`, and the time limit's
+        step count).  None for an env that is not MuJoCo's."""
+        physics, elapsed, placed = [], [], {name: [] for name in RESET_FIELDS}
         for env in self.envs:
             model, data = (getattr(env.unwrapped, name, None) for name in ("model", "data"))
             limit = _time_limit(env)
@@ -126,15 +127,21 @@ class MemberEnvs:
             mujoco.mj_getState(model, data, saved, SIM_STATE)
             physics.append(saved)
             elapsed.append(limit._elapsed_steps)
+            for name in RESET_FIELDS:
+                placed[name].append(getattr(model, name).copy())
         return {"step_count": np.int64(self.step_count), "episode_return": self.episode_return.copy(),
                 "episode_length": self.episode_length.copy(), "observations": self.observations.copy(),
-                "physics": np.stack(physics), "elapsed": np.array(elapsed, np.int64)}
+                "physics": np.stack(physics), "elapsed": np.array(elapsed, np.int64),
+                **{name: np.stack(values) for name, values in placed.items()}}
 
     def restore(self, state: dict[str, np.ndarray]) -> None:
         """Continue from `state()` of envs of the same env name and seeds: every later step is what the saved envs
         would have stepped."""
-        for env, physics, elapsed in zip(self.envs, state["physics"], state["elapsed"], strict=True):
+        for m, (env, physics, elapsed) in enumerate(zip(self.envs, state["physics"], state["elapsed"], strict=True)):
             model, data = env.unwrapped.model, env.unwrapped.data
+            for name in RESET_FIELDS:
+                if name in state:  # (an online state saved before these were, restored without them)
+                    getattr(model, name)[:] = np.asarray(state[name][m])
             mujoco.mj_setState(model, data, np.asarray(physics), SIM_STATE)
             mujoco.mj_forward(model, data)  # positions, contacts and forces derived from it, as after a step
             _time_limit(env)._elapsed_steps = int(elapsed)
@@ -148,7 +155,10 @@ class MemberEnvs:
             env.close()
 
 
-SIM_STATE = mujoco.mjtState.mjSTATE_INTEGRATION  # all MuJoCo needs to step on exactly as before
+SIM_STATE = mujoco.mjtState.mjSTATE_INTEGRATION  # all MuJoCo's data needs to step on exactly as before
+# model fields an env's reset may set (Adroit places the door, hammer nail and relocate object and target as body and
+# site positions, the pen's goal as a body orientation): saved with the simulator state
+RESET_FIELDS = ("body_pos", "body_quat", "site_pos", "site_quat")
 
 
 def _time_limit(env: Any) -> Any:
