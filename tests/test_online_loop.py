@@ -221,6 +221,7 @@ def test_a_run_killed_inside_the_online_phase_goes_on_from_its_last_checkpoint_e
     (["--env", "door", "--level", "medium"], "door's levels: human, cloned"),
     (["--replay", "sometimes"], "invalid choice"),
     (["--algo", "iql", "--arms", "online-rl"], "no form without its behaviour terms"),
+    (["--buffer-capacity", "500"], "give a capacity of at least 1999"),  # before the offline phases, not after
 ])
 def test_finetune_refuses_bad_online_settings_in_one_line(tmp_path, args, fragment):
     result = run_module("experiments.finetune", *args, "--out", tmp_path / "x")

@@ -139,7 +139,7 @@ class Study:
             raise ValueError(f"Study.variants need unique labels, got {labels}")
         if self.reference is not None and not any(reference_label(self, label) for label in labels):
             raise ValueError(f"Study.reference = {self.reference!r} is not a variant label ({', '.join(labels)})")
-        get_env_spec(self.env)
+        horizon = get_env_spec(self.env).max_episode_steps
         # every variant's config, resolved once (registry, per-env defaults, preset, overrides) and checked with its
         # budget before anything is written; everyone reads it from here (`config`)
         resolved = {v.label: v.resolve(self.env, self.dataset) for v in self.variants}
@@ -149,6 +149,7 @@ class Study:
             check_call_grid(stages, self.eval_every)
             if self.online is not None:
                 self.online.check(label, stages[-1])
+                self.online.rows(horizon)  # a buffer too small for the env's episodes: refused before any training
         object.__setattr__(self, "_configs", configs)  # not fields: not in to_json, equality or replace
         object.__setattr__(self, "_sources", {label: r.sources for label, r in resolved.items()})
         widest = max(len(group) for group, _ in self.groups()) * len(self.seeds)
