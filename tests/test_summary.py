@@ -100,6 +100,16 @@ def test_a_diverged_seed_is_named_and_left_out_of_the_aggregates():
     assert by["90% of best"]["censored"] == [True, True, False]  # 0.9 * 60 = 54: only seed 2 (at 2000)
 
 
+def test_per_seed_lists_follow_the_study_seed_order():
+    study = Study(name="t", dataset="hopper-medium", env="hopper", seeds=(2, 0, 1), updates=2000, eval_every=1000,
+                  variants=(Variant.of("scratch", "td3bc", pretrain="none"),), reference="scratch")
+    nan = float("nan")
+    rows = [r | {"seed": {0: 2, 1: 0, 2: 1}[r["seed"]]} for r in rows_of("scratch", [[10, nan], [30, 40], [50, 60]])]
+    (s,) = summarize(study, rows, {})
+    assert s["seeds"] == [2, 0, 1] and s["seeds_diverged"] == [2]  # seed 2's curve is the first, and diverged
+    assert s["final_scores"][1:] == [40.0, 60.0]
+
+
 def test_unknown_reference_label_is_refused():
     with pytest.raises(ValueError, match="reference = 'scrach' is not a variant label"):
         Study(name="t", dataset="hopper-medium", env="hopper", seeds=(0,), updates=10, eval_every=5,

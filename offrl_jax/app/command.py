@@ -308,7 +308,8 @@ class Command:
                                 parallel=args.parallel, logger=args.logger, data_sha256=sha, verify=False)
             if self.writer:
                 print_table(summary)
-                print(f"results: {where}/summary.json, curves.csv, curves.png", file=sys.stderr)
+                online = ", online.png, online/*.hdf5" if study.online is not None else ""
+                print(f"results: {where}/summary.json, curves.csv, curves.png{online}", file=sys.stderr)
 
     # 7. clean up
     def clean_up(self, ok: bool) -> str | None:

@@ -7,6 +7,7 @@ import contextlib
 import csv
 import io
 import warnings
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -96,15 +97,18 @@ def pretrain_ends_of(rows: list[dict]) -> dict[str, int]:
     return ends
 
 
-def score_matrix(rows: list[dict], label: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(updates (E,), seconds (E,), scores (S, E)) of one variant.  The online phase's warm-up evaluations, made
-    before its first update, are left out: the hand-over's update is the offline phases' last evaluation
+def score_matrix(rows: list[dict], label: str, seeds: Sequence[int] | None = None
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(updates (E,), seconds (E,), scores (S, E)) of one variant, a row per seed of `seeds` in that order (a seed
+    without rows all NaN), or per seed of the rows, in ascending order.  The online phase's warm-up evaluations,
+    made before its first update, are left out: the hand-over's update is the offline phases' last evaluation
     (`offrl_jax.run.online_summary.online_curves` has them, by env step)."""
     mine = [r for r in rows if r["variant"] == label]
     last_offline = max((r["update"] for r in mine if r.get("phase") != "online"), default=-1)
     mine = [r for r in mine if r.get("phase") != "online" or r["update"] > last_offline]
     updates = np.array(sorted({r["update"] for r in mine}))
-    seeds = sorted({r["seed"] for r in mine})
+    seeds = list(seeds) if seeds is not None else sorted({r["seed"] for r in mine})
+    mine = [r for r in mine if r["seed"] in seeds]
     scores = np.full((len(seeds), len(updates)), np.nan)
     seconds = np.zeros(len(updates))
     for r in mine:

@@ -80,7 +80,7 @@ def summarize(study: Study, rows: list[dict], pretrain_ends: dict[str, int],
 
 
 def _summarize(study: Study, rows: list[dict], pretrain_ends: dict[str, int], behaviour: float | None) -> list[dict]:
-    curves = {v.label: score_matrix(rows, v.label) for v in study.variants}
+    curves = {v.label: score_matrix(rows, v.label, study.seeds) for v in study.variants}  # rows: the study's seeds
     finals = {label: final_scores(study, u, s) if len(u) else np.full(len(study.seeds), np.nan)
               for label, (u, _, s) in curves.items()}
     means = [np.nanmean(s, axis=0) for u, _, s in curves.values() if len(u)]
