@@ -42,11 +42,20 @@ from collections import defaultdict
 from pathlib import Path
 
 from offrl_jax.app.outputs import RUN_FILES, replaced_dir
+from offrl_jax.data import catalogue
 from offrl_jax.run.aggregate import aggregate, aggregate_table, arms, claims_table, plot_aggregate
 from offrl_jax.run.figures import behaviour_score, plot_studies
+from offrl_jax.run.provenance import fingerprint, recorded_data
 from offrl_jax.run.results import check_curve_algos, check_curve_seeds, pretrain_ends_of, read_curves, short_curves
 from offrl_jax.run.study import Study
-from offrl_jax.run.summary import merge_runs, merged_differences, resummarize, summarize, summary_table as table
+from offrl_jax.run.summary import (
+    behaviour_score as of_data,
+    merge_runs,
+    merged_differences,
+    resummarize,
+    summarize,
+    summary_table as table,
+)
 from offrl_jax.system.cli import OneLineParser, being_written, check_writable_dir, check_writable_file, print_error
 
 
@@ -178,7 +187,7 @@ def current(path: Path, summary: list[dict], reference: bool = True, partial: bo
     if (run / "config.json").is_file() and (run / "curves.csv").is_file():
         known = next((s["behaviour_score"] for s in summary if s.get("behaviour_score") is not None), None)
         if known is None and reference:
-            known = behaviour_score(summary[0].get("dataset", ""))
+            known = recorded_behaviour(run, summary[0].get("dataset", ""))
         if partial:  # the variants and budget the summary was made for, not config.json's
             study, labels = Study.from_json((run / "config.json").read_text()), [s["variant"] for s in summary]
             study = dataclasses.replace(study, updates=max(s["updates"] for s in summary),
@@ -191,6 +200,20 @@ def current(path: Path, summary: list[dict], reference: bool = True, partial: bo
         raise ValueError(f"{path}: written before the interval statistics, and without its run's config.json and "
                          "curves.csv to recompute them")
     return summary
+
+
+def recorded_behaviour(run: Path, dataset: str) -> float | None:
+    """The behaviour score of the data a run trained on, for a run whose summary did not record it: the cached
+    `dataset`'s where its fingerprint is the one the run's config.json recorded; None where the run recorded none
+    (made before the records) or the cache now holds another version of it (a guess would set a false threshold)."""
+    sha = recorded_data(run / "config.json")
+    if sha is None or not catalogue.is_cached(dataset):
+        return None
+    try:
+        ds = catalogue.load(dataset)
+    except Exception:  # noqa: BLE001 -- a threshold is optional; a dataset we cannot read has none
+        return None
+    return of_data(ds) if fingerprint(ds) == sha else None
 
 
 def curve_table(curves: Path) -> str:

@@ -317,3 +317,24 @@ def test_merge_says_when_the_variants_differ_in_more_than_their_pre_training(tmp
     err = capsys.readouterr().err
     assert "warning: the merged variants differ in more than their pre-training: alpha (pretrained: 2.5, " \
            "scratch: 10.0)\n" in err, err
+
+
+@pytest.mark.parametrize("recorded, expected", [("same", True), ("other", False), (None, False)])
+def test_a_run_without_its_behaviour_score_gets_the_cached_data_s_only_where_it_is_the_data_it_trained_on(
+        tmp_path, monkeypatch, recorded, expected):
+    import json
+
+    from experiments import report
+    from offrl_jax.run.provenance import fingerprint, run_record
+    from offrl_jax.run.summary import behaviour_score
+    from tests.conftest import synthetic_dataset
+
+    cached = synthetic_dataset()
+    monkeypatch.setattr(report.catalogue, "is_cached", lambda name: name == "hopper-medium")
+    monkeypatch.setattr(report.catalogue, "load", lambda name: cached)
+    runs = [] if recorded is None else [run_record(cached if recorded == "same" else synthetic_dataset(seed=1),
+                                                   "hopper-medium")]
+    (tmp_path / "config.json").write_text(json.dumps({"runs": runs}))
+    score = report.recorded_behaviour(tmp_path, "hopper-medium")
+    assert score == (behaviour_score(cached) if expected else None) and (score is not None) == expected
+    assert fingerprint(cached) != fingerprint(synthetic_dataset(seed=1))
