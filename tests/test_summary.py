@@ -263,6 +263,15 @@ def test_merge_runs_resummarises_variants_trained_apart(tmp_path, capsys):
     assert "dataset differ" in capsys.readouterr().err and not (tmp_path / "ac").exists()
     assert report.main(["--merge", str(tmp_path / "bb"), str(b), str(b)]) == 2  # the same run twice
     assert "is given twice" in capsys.readouterr().err and not (tmp_path / "bb").exists()
+    # the same study on other data (another version of the dataset): its config.json recorded another SHA-256
+    from offrl_jax.run.provenance import run_record
+    from tests.conftest import synthetic_dataset
+
+    for run, seed in ((a, 0), (b, 1)):
+        raw = json.loads((run / "config.json").read_text())
+        (run / "config.json").write_text(json.dumps(raw | {"runs": [run_record(synthetic_dataset(seed=seed))]}))
+    assert report.main(["--merge", str(tmp_path / "ab2"), str(a), str(b)]) == 2
+    assert "trained on different data" in capsys.readouterr().err and not (tmp_path / "ab2").exists()
 
 
 def test_a_truncated_curves_csv_is_refused_not_read_short(tmp_path):

@@ -25,6 +25,7 @@ import numpy as np
 
 from offrl_jax.run import bc_level, stats
 from offrl_jax.run.online_summary import online_table, summarize_online
+from offrl_jax.run.provenance import recorded_data
 from offrl_jax.run.results import (
     all_nan_expected,
     check_curve_algos,
@@ -349,6 +350,10 @@ def merge_runs(run_dirs: list[Path], out_dir: Path, behaviour: float | None = No
     for d, fields in zip(run_dirs[1:], shared[1:]):
         if differ := [k for k in fields if fields[k] != shared[0][k]]:
             raise ValueError(f"{d} is not the same study as {run_dirs[0]}: {', '.join(differ)} differ")
+    shas = {d: recorded_data(d / "config.json") for d in run_dirs}  # the data each trained on, where recorded
+    if len(set(shas.values()) - {None}) > 1:
+        raise ValueError("the runs trained on different data (config.json's dataset SHA-256: "
+                         + ", ".join(f"{d}: {sha[:8] if sha else 'none recorded'}" for d, sha in shas.items()) + ")")
     variants = tuple(v for s in studies for v in s.variants)
     # a run without the from-scratch variant names no reference; the one that trained it does
     references = sorted({s.reference for s in studies if s.reference is not None})
