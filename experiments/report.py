@@ -43,7 +43,7 @@ from pathlib import Path
 
 from offrl_jax.app.outputs import RUN_FILES, replaced_dir
 from offrl_jax.data import catalogue
-from offrl_jax.run.aggregate import aggregate, aggregate_table, arms, claims_table, plot_aggregate
+from offrl_jax.run.aggregate import aggregate, aggregate_table, arms, claims_table, not_poolable, plot_aggregate
 from offrl_jax.run.figures import behaviour_score, plot_studies
 from offrl_jax.run.provenance import fingerprint, recorded_data
 from offrl_jax.run.results import check_curve_algos, check_curve_seeds, pretrain_ends_of, read_curves, short_curves
@@ -323,9 +323,13 @@ def main(argv=None) -> int:
             found.append(summary)
         if len(found) > 1:
             print(claims_table(found, [str(d) for d in study_dirs]) + "\n")
-            if arms(found):
+            if arms(found) and (why := not_poolable(found, [str(d) for d in study_dirs])):
+                print(f"No aggregate across these studies: {why}.\n")
+            elif arms(found):
                 print(aggregate_table(aggregate(found)) + "\n")
         if args.aggregate is not None:
+            if len(found) > 1 and (why := not_poolable(found, [str(d) for d in study_dirs])):
+                raise ValueError(f"--aggregate: {why}; give studies whose arms are one algorithm and other runs")
             written = plot_aggregate(found, [read_curves(d / "curves.csv") for d in study_dirs], args.aggregate)
             print(f"aggregate figure: {', '.join(map(str, written))}", file=sys.stderr)
         if args.plot is not None:

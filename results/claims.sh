@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# The claims table of RESULTS.md: every study's tables from its curves, then one row per comparison and the aggregate
+# The claims table of RESULTS.md: every study's tables from its curves, then one row per comparison (no aggregate:
+# their arms are several algorithms)
 # (python -m experiments.report; extra arguments, e.g. --curves, are passed on).  Run from anywhere.
 set -euo pipefail
 cd "$(dirname "$0")/.."

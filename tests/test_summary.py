@@ -347,3 +347,16 @@ def test_a_run_without_its_behaviour_score_gets_the_cached_data_s_only_where_it_
     score = report.recorded_behaviour(tmp_path, "hopper-medium")
     assert score == (behaviour_score(cached) if expected else None) and (score is not None) == expected
     assert fingerprint(cached) != fingerprint(synthetic_dataset(seed=1))
+
+
+def test_arms_of_other_algorithms_or_the_same_runs_are_not_pooled_across_studies():
+    from offrl_jax.run.aggregate import not_poolable
+
+    def study(algo, finals):
+        return [{"variant": "scratch", "algo": algo, "final_scores": finals, "auc_scores": finals}]
+
+    a, b = study("td3bc", [1.0, 2.0]), study("td3bc", [3.0, 4.0])
+    assert not_poolable([a, b], ["a", "b"]) is None
+    assert not_poolable([a, study("edac", [3.0, 4.0])], ["a", "e"]) == "'scratch' is edac, td3bc in different studies"
+    merged = study("td3bc", [1.0, 2.0])  # a's runs again
+    assert not_poolable([a, b, merged], ["a", "b", "m"]) == "a and m hold the same runs of 'scratch'"

@@ -22,6 +22,23 @@ def arms(summaries: list[list[dict]]) -> list[str]:
     return [s["variant"] for s in summaries[0] if s["variant"] in common]
 
 
+def not_poolable(summaries: list[list[dict]], names: list[str]) -> str | None:
+    """Why the studies' common arms cannot be pooled, or None: an arm that is a different algorithm in two studies
+    (a "scratch" of TD3+BC beside one of EDAC), or the same runs in two studies (a run and a merge holding it: its
+    seeds' final scores all equal)."""
+    for arm in arms(summaries):
+        mine = [next(s for s in summary if s["variant"] == arm) for summary in summaries]
+        if len(algos := {s.get("algo") for s in mine}) > 1:
+            return f"'{arm}' is {', '.join(sorted(map(str, algos)))} in different studies"
+        seen: dict[tuple, str] = {}
+        for name, s in zip(names, mine):
+            key = tuple(s["final_scores"])
+            if key in seen:
+                return f"{seen[key]} and {name} hold the same runs of '{arm}'"
+            seen[key] = name
+    return None
+
+
 def comparisons(summaries: list[list[dict]]) -> list[tuple[str, str]]:
     """(variant, reference) pairs that every study compares (its `vs_reference`)."""
     pairs = None
