@@ -238,7 +238,10 @@ def summary_table(summary: list[dict]) -> str:
     seeds), and per variant compared with its reference the updates to each threshold per seed and the speed-up."""
     first = summary[0]
     n = len(first["seeds"])
-    head = (f"{first['dataset']}, {n} seed{'s' if n != 1 else ''}, {first['updates']:,} updates per variant; "
+    online = next((s["online"]["online_steps"] for s in summary if s.get("online")), None)
+    budget = f"{first['updates']:,} updates per variant" + (
+        "" if online is None else f", then {online:,} online env steps (this table's updates count both)")
+    head = (f"{first['dataset']}, {n} seed{'s' if n != 1 else ''}, {budget}; "
             "IQM over seeds" + (" [stratified-bootstrap 95 % CI]" if n > 1 else " (one seed: no interval)"))
     if _known(first.get("behaviour_score")):
         head += f"; behaviour data {first['behaviour_score']:.1f}"
