@@ -132,3 +132,7 @@ def test_run_study_records_the_hand_over(tmp_path, tiny_dataset):
     assert [r["update"] for r in rows if r["phase"] == "offline_rl"] == [300, 400, 500, 600]
     (summary,) = json.loads((tmp_path / "summary.json").read_text())
     assert summary["pretrain_updates"] == 200
+    # a resume with nothing left to train (say after a stop in a later variant) keeps where pre-training ended
+    run_study(study, tmp_path, tiny_dataset, resume=True, progress=False)
+    (summary,) = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["pretrain_updates"] == 200

@@ -211,10 +211,10 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
         record()
         if online is not None and env_steps >= online.steps:
             bar.update((last_update + online.updates()) * len(group))
-            return pretrain_end
+            return ended_pretraining(phases, rows, pretrain_end)
     bar.update(start * len(group))
     if start >= last_update and online is None:
-        return pretrain_end
+        return ended_pretraining(phases, rows, pretrain_end)
     every = study.checkpoint_every or study.eval_every
     last_saved = start
     last_score = {(r["variant"], r["seed"]): r["score"] for r in rows}  # resumed: a seed that had diverged stays out
@@ -312,9 +312,14 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
                                 [r for r in rows if r["variant"] == variant.label],
                                 meta | {"members": meta["members"][mine], "best_score": best[variant.label]})
         record()
-    if any(p.auto_stop for p in phases):  # where pre-training actually ended
-        return max(pretrain_ends_of(rows).values(), default=pretrain_end)
-    return pretrain_end
+    return ended_pretraining(phases, rows, pretrain_end)
+
+
+def ended_pretraining(phases: list, rows: list[dict], planned: int) -> int:
+    """The pre-training updates of a group: the `planned` ones, or where a self-ending phase ended (its rows say)."""
+    if any(p.auto_stop for p in phases):
+        return max(pretrain_ends_of(rows).values(), default=planned)
+    return planned
 
 
 def _keep(out_dir: Path, group: tuple[Variant, ...], update: int, keep: int) -> None:
