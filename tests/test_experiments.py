@@ -413,6 +413,25 @@ def test_a_config_replay_keeps_the_saved_runs_parallel_unless_given(tmp_path, ti
         assert command.args.parallel == parallel
 
 
+def test_the_parallel_a_config_replay_ran_with_is_the_replayed_runs(tmp_path):
+    import json
+
+    from offrl_jax.app.command import recorded_parallel
+
+    def run(name, command):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "config.json").write_text(json.dumps({"runs": [{"command": command}]}))
+        return tmp_path / name / "config.json"
+
+    first = run("first", "python -m experiments.mujoco_medium --parallel 1 --out first")
+    replay = run("replay", f"python -m experiments.mujoco_medium --config {first.parent} --out replay")
+    assert recorded_parallel(replay, "experiments.mujoco_medium", 2) == 1  # it took the replayed run's
+    moved = run("moved", "python -m experiments.mujoco_medium --config elsewhere --out moved")
+    assert recorded_parallel(moved, "experiments.mujoco_medium", 2) is None  # not known: nothing is refused
+    plain = run("plain", "python -m experiments.mujoco_medium --out plain")
+    assert recorded_parallel(plain, "experiments.mujoco_medium", 2) == 2
+
+
 def test_debug_variable_shows_the_traceback(tmp_path):
     result = cli("--lam", "1.5", "--out", tmp_path / "x", timeout=120)
     assert result.returncode == 2 and "Traceback" not in result.stderr

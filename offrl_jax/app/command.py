@@ -346,14 +346,22 @@ class Command:
         return failed
 
 
-def recorded_parallel(config_path: Path, prog: str, default: int) -> int | None:
-    """The --parallel of a run's last start or resume by command `prog` (`default` where it was not given; None:
-    not recorded, or started otherwise, say by `run_study` from Python)."""
+def recorded_parallel(config_path: Path, prog: str, default: int, depth: int = 0) -> int | None:
+    """The --parallel of a run's last start or resume by command `prog` (`default` where it was not given, or the
+    --parallel of the run its --config replayed, which it took; None: not recorded, or started otherwise, say by
+    `run_study` from Python, or replaying a run no longer where it was)."""
     words = recorded_command(config_path)
     if words is None or words[1:3] != ["-m", prog]:
         return None
-    value = next((w.split("=", 1)[1] if "=" in w else nxt for w, nxt in zip(words, words[1:] + [""])
-                  if w == "--parallel" or w.startswith("--parallel=")), None)
+    flag = lambda name: next((w.split("=", 1)[1] if "=" in w else nxt  # noqa: E731
+                              for w, nxt in zip(words, words[1:] + [""]) if w == name or w.startswith(name + "=")),
+                             None)
+    value = flag("--parallel")
+    if value is None and (replayed := flag("--config")):
+        path = Path(replayed) / "config.json" if Path(replayed).is_dir() else Path(replayed)
+        if not path.is_absolute() or not path.is_file() or depth > 8:
+            return None
+        return recorded_parallel(path, prog, default, depth + 1)
     try:
         return default if value is None else int(value)
     except ValueError:
