@@ -67,7 +67,7 @@ def build(args) -> Study:
     online = online_config(args)
     if args.arms is None:
         args.arms = [arm for arm in ARMS if arm != "online-rl" or args.algo in WITHOUT_BEHAVIOUR]
-    if "pretrain-only" in args.arms and "pretrain_auto" in (getattr(args, "pretrain_updates", None) or {}):
+    if "pretrain-only" in args.arms and (getattr(args, "pretrain_updates", None) or {}).get("pretrain_auto"):
         raise UsageError("--pretrain-updates auto: the pretrain-only arm pre-trains for the whole offline budget "
                          "(--updates); give a number, or leave that arm out (--arms pretrained scratch)")
     if "online-rl" in args.arms and args.algo not in WITHOUT_BEHAVIOUR:

@@ -413,6 +413,29 @@ def test_a_config_replay_keeps_the_saved_runs_parallel_unless_given(tmp_path, ti
         assert command.args.parallel == parallel
 
 
+def test_a_config_replay_changes_only_what_its_flags_say(tmp_path, tiny_hdf5):
+    from experiments.mujoco_medium import make_parser
+    from offrl_jax.app.command import Command
+    from offrl_jax.app.studies import HPARAM_DESTS, given
+    from offrl_jax.run.study import Study, Variant
+
+    auto = Variant.of("pretrained", "td3bc", pretrain_auto=True, pretrain_auto_window=100, pretrain_updates=200)
+    study = Study(name="one", dataset=str(tiny_hdf5), env="hopper", updates=400, eval_every=100, batch_size=32,
+                  seeds=(5, 6), variants=(auto,))
+    (tmp_path / "config.json").write_text(study.record_json())
+
+    def replayed(*argv):
+        argv = ["--config", str(tmp_path / "config.json"), "--out", str(tmp_path / "new"), *argv]
+        command = Command(make_parser().parse_args(argv), make_parser(), argv)
+        command.read(None, given, HPARAM_DESTS)
+        return command.built
+
+    assert replayed("--seed-offset", "7").seeds == (7, 8)  # the saved count, not the flag's default 5
+    assert replayed("--seeds", "3").seeds == (5, 6, 7)  # from the saved first seed, not 0
+    fixed = replayed("--pretrain-updates", "100")
+    assert fixed.config("pretrained").pretrain_updates == 100 and not fixed.config("pretrained").pretrain_auto
+
+
 def test_the_parallel_a_config_replay_ran_with_is_the_replayed_runs(tmp_path):
     import json
 

@@ -98,10 +98,16 @@ def replay(saved: Study | list[Study], args, given: set[str], hparams: dict) -> 
         raise UsageError(f"--config takes one value per hyper-parameter (got several for {', '.join(swept)}); "
                          "start a new run to sweep")
     fields = {f: getattr(args, f) for f in RUN_FIELDS if f in given}
-    if given & {"seeds", "seed_offset"}:
-        fields["seeds"] = tuple(range(args.seed_offset, args.seed_offset + args.seeds))
     if "dataset_path" in given:
         fields["dataset"] = str(args.dataset_path)
+
+    def seeds(study: Study) -> dict:
+        """--seeds / --seed-offset over the saved seeds: the one not given is the saved run's (its count, or its
+        first seed), not the flag's default."""
+        if not given & {"seeds", "seed_offset"}:
+            return {}
+        first = args.seed_offset if "seed_offset" in given else study.seeds[0]
+        return {"seeds": tuple(range(first, first + (args.seeds if "seeds" in given else len(study.seeds))))}
 
     def one(study: Study) -> Study:
         for field in hparams:  # the variants were made to differ in it (a sweep, an ablation): their labels say so
@@ -113,7 +119,7 @@ def replay(saved: Study | list[Study], args, given: set[str], hparams: dict) -> 
         variants = tuple(dataclasses.replace(v, overrides=tuple(sorted((dict(v.overrides) | hparams).items())),
                                              flags=None if v.flags is None else (*v.flags, *hparams))
                          for v in study.variants)
-        return dataclasses.replace(study, variants=variants, **fields)
+        return dataclasses.replace(study, variants=variants, **fields, **seeds(study))
 
     return [one(s) for s in saved] if isinstance(saved, list) else one(saved)
 

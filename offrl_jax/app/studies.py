@@ -81,11 +81,12 @@ def parser(prog: str, doc: str, updates: int = 100_000,
 
 
 def pretrain_budget(text: str) -> dict:
-    """--pretrain-updates: "N" -> {pretrain_updates: N}; "auto" or "auto:CAP" -> self-ending pre-training."""
+    """--pretrain-updates: "N" -> N updates, not self-ending (also over a replayed run's auto); "auto" or
+    "auto:CAP" -> self-ending pre-training."""
     if text == "auto" or text.startswith("auto:"):
         cap = positive_int(text[5:]) if text.startswith("auto:") else None
         return {"pretrain_auto": True} | ({"pretrain_updates": cap} if cap else {})
-    return {"pretrain_updates": positive_int(text)}
+    return {"pretrain_updates": positive_int(text), "pretrain_auto": False}
 
 
 def overrides(args) -> dict:
