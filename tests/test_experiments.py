@@ -165,6 +165,8 @@ def test_a_killed_overwrite_leaves_the_earlier_run_where_the_next_command_finds_
     proc.wait()
     result = run_module("experiments.report", str(out))
     assert result.returncode == 2 and f"the run it was replacing is in {aside}" in result.stderr, result.stderr
+    result = cli("--resume", out, "--dry-run")  # a dry run only reads: both directories stay as they are
+    assert f"note: {aside} holds the earlier run" in result.stderr and aside.is_dir()
     result = cli("--resume", out, "--no-progress")
     assert result.returncode == 2 and "the earlier run in" in result.stderr and "is given back" in result.stderr
     assert result.stderr.strip().splitlines()[-1].startswith(f"error: {out}: the --overwrite that was replacing")

@@ -179,7 +179,11 @@ class Command:
             raise UsageError("--resume and --config exclude each other: --resume continues a run in place, "
                              "--config starts a new one from its settings")
         named = args.resume if self.resuming else args.out
-        if named is not None and replaced_dir(named).is_dir():  # an --overwrite of it was killed: finish its work
+        interrupted = named is not None and replaced_dir(named).is_dir()  # an --overwrite of it was killed
+        if interrupted and getattr(args, "dry_run", False):  # a dry run only reads: the next real command mends it
+            print(f"note: {replaced_dir(named)} holds the earlier run of an --overwrite that was stopped; the next "
+                  "command that is not a dry run puts it in order", file=sys.stderr)
+        elif interrupted:  # finish its work
             if give_back_replaced(named) and self.resuming:
                 raise UsageError(f"{named}: the --overwrite that was replacing this run stopped before its first "
                                  f"checkpoint, so nothing of it can be resumed; the earlier run is back in {named} "
