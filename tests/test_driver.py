@@ -60,13 +60,16 @@ def test_edac_soft_pretraining_computes_per_seed_soft_returns(tiny_dataset):
 
 def test_normalized_rewards_give_episode_returns_a_range_of_1000():
     from offrl_jax.data.dataset import Dataset
-    # two episodes (a terminal at row 1, the dataset's end at row 4) with returns 1 + 3 = 4 and 2 + 2 + 2 = 6
+    # two episodes (a terminal at row 1, a time-out at row 4) with returns 1 + 3 = 4 and 2 + 2 + 2 = 6
     rewards = np.array([1, 3, 2, 2, 2], np.float32)
     terminals = np.array([0, 1, 0, 0, 0], np.float32)
     obs = np.zeros((5, 1), np.float32)
-    ds = Dataset(obs, np.zeros((5, 1), np.float32), rewards, obs, terminals, np.zeros(5, np.float32), env="hopper")
+    ds = Dataset(obs, np.zeros((5, 1), np.float32), rewards, obs, terminals, np.array([0, 0, 0, 0, 1], np.float32),
+                 env="hopper")
     assert ds.reward_scale() == 1000 / (6 - 4) == 500
     assert ds.select(slice(2, 5)).reward_scale() == 1.0  # one return: nothing to spread
+    # a last episode that the data cuts off (return 2 so far) is left out, as CORL's loader does: one return left
+    assert ds.select(slice(0, 3)).reward_scale() == 1.0 and list(ds.select(slice(0, 3)).episode_returns()) == [4, 2]
     plain = device_data(ds, 0.5).arrays
     scaled = device_data(ds, 0.5, normalize_reward=True).arrays
     np.testing.assert_allclose(np.asarray(scaled["rewards"]), 500 * rewards)

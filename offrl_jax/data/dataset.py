@@ -66,8 +66,12 @@ class Dataset:
 
     def reward_scale(self, steps: int = 1000) -> float:
         """`steps` / (max - min episode return): the factor that gives the dataset's episode returns a range of
-        `steps` (CORL's reward normalisation for MuJoCo; 1 when every episode has the same return)."""
+        `steps` (CORL's reward normalisation for MuJoCo; 1 when every episode has the same return).  As CORL's, it
+        leaves out a last episode that the data cuts off (no terminal or time-out on its last row, as after
+        --max-transitions)."""
         returns = self.episode_returns()
+        if returns.size > 1 and not (self.terminals[-1] or self.timeouts[-1]):
+            returns = returns[:-1]
         spread = float(returns.max() - returns.min()) if returns.size else 0.0
         return steps / spread if spread > 0 else 1.0
 
