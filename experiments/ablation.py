@@ -1,7 +1,8 @@
 """Appendix C: ablation of actor and critic pre-training — actor-only vs critic-only vs actor+critic vs none.
 
-Default (sized for a 2-core CPU, as run for RESULTS.md): TD3+BC on hopper-medium, 3 seeds, 30k updates per
-variant, evaluation every 2.5k (4 variants: ~40 min on 2 cores).  The paper: 1M updates.
+Default (sized for a 2-core CPU): TD3+BC on hopper-medium, 3 seeds, 30k updates per variant, evaluation every 2.5k
+(4 variants: ~40 min on 2 cores).  The paper: 1M updates.  RESULTS.md's ablations ran 5 seeds, 40k updates and alpha
+2.5 (results/ablation/*/README.md has each command).
 
     python -m experiments.ablation [--env walker2d] [--algo edac] [--updates N]
 """

@@ -8,8 +8,8 @@ minutes on 2 idle CPU cores with the dataset generated first (23 min of training
 long: `--seeds 10`).  The final table gives every seed's updates to each threshold, the speed-up with its
 bootstrap interval and IQM scores (`offrl_jax.run.summary`).  TD3+BC's alpha is 2.5 here (the declared default preset
 `published`: TD3+BC's published alpha, with which the from-scratch baseline learns on this data); the paper's
-per-env alphas (hopper 10) come with `--preset authors` or `--alpha 10`.  See RESULTS.md for the measured
-wall-clock time and for what happens with longer budgets (`--updates 300000`).
+per-env alphas (hopper 10) come with `--preset authors` or `--alpha 10`.  The wall-clock time is measured in
+results/mujoco_medium/default-5seeds/README.md; RESULTS.md says what happens with longer budgets (`--updates 300000`).
 
     python -m experiments.mujoco_medium
     python -m experiments.mujoco_medium --alpha 2.5 10                                   # both alphas, one program

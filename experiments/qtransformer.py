@@ -1,8 +1,8 @@
 """Appendix F: the Q-Transformer objective max(MC, r + gamma Q') throughout training vs our actor+critic
 pre-training vs neither (TD3+BC).
 
-Default (sized for a 2-core CPU, as run for RESULTS.md): hopper-medium, 3 seeds, 20k updates per variant,
-evaluation every 2k (~30 min on one core).  The paper: 1M updates.
+Default (sized for a 2-core CPU; RESULTS.md's run used it on hopper-medium v0, results/qtransformer/): hopper-medium,
+3 seeds, 20k updates per variant, evaluation every 2k (~30 min on one core).  The paper: 1M updates.
 
     python -m experiments.qtransformer [--env walker2d] [--updates N]
 """

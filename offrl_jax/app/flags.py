@@ -228,8 +228,8 @@ def run_args(parser: argparse.ArgumentParser, updates: int | None, eval_every: i
                    help="replace the earlier run in --out (only a directory whose config.json is a saved study)")
     g.add_argument("--resume", type=Path, default=None,
                    help="continue the run saved in this directory with the settings saved there; --updates N "
-                        "larger than the saved budget extends it, --parallel and --no-progress may change; any "
-                        "other flag is refused")
+                        "larger than the saved budget extends it (not a run with an online phase), --no-progress "
+                        "may change, --parallel only to the run's own; any other flag is refused")
     g.add_argument("--config", type=Path, default=None,
                    help="re-run the run saved in this config.json (or run directory) exactly, into a new --out; "
                         "run flags and single-valued hyper-parameter flags given with it change that one value "

@@ -58,7 +58,8 @@ def parser(prog: str, doc: str, updates: int = 100_000,
     add("--pretrain-updates", type=pretrain_budget, default=None,
         help="N, or auto[:CAP] to end each pre-training phase when its supervised losses improve by less than 1 %% "
              "per 1k updates (every seed; capped at CAP or the default; the rest goes to offline RL; --eval-every "
-             "must then be a multiple of 1000, e.g. 5000).  Default: per algorithm and env")
+             "must then be a multiple of 1000, e.g. 5000); it differs per algorithm and env (the default "
+             "--algo's below; --dry-run shows another's).  Default: per algorithm and env")
     help_authors = ("authors: the authors' code switch by switch (LayerNorm without scale/bias and eps 1e-5, "
                     "PyTorch init, a 3x256 TD3+BC actor, no bootstrap at time-outs, x/sg(x) loss balancing, the "
                     "paper's per-env alphas; docs/fidelity.md); flags given with it override single values")
