@@ -23,8 +23,9 @@ import jax.numpy as jnp
 LOG_STD_MIN, LOG_STD_MAX = -5.0, 2.0
 # "flax": lecun-normal kernels, zero biases.  "torch": PyTorch's nn.Linear default, kaiming-uniform(a=sqrt(5)) =
 # U(+-1/sqrt(fan_in)) for kernel and bias.  "orthogonal": orthogonal kernels (gain sqrt(2) hidden, 1e-2 output),
-# zero biases (CORL's CQL with orthogonal_init=True).
-INITS = ("flax", "torch", "orthogonal")
+# zero biases (CORL's CQL today with orthogonal_init=True).  "orthogonal_all": gain sqrt(2) for the output layer too
+# (the authors' cql.py, and CORL's before it changed the output layer's).
+INITS = ("flax", "torch", "orthogonal", "orthogonal_all")
 TANH_LOG_DETS = ("exact", "eps")
 
 
@@ -40,8 +41,8 @@ class Arch:
     def kernel_init(self, fan_in: int, last: bool):
         if self.init == "torch":
             return _uniform(1.0 / math.sqrt(fan_in))
-        if self.init == "orthogonal":
-            return nn.initializers.orthogonal(1e-2 if last else math.sqrt(2.0))
+        if self.init in ("orthogonal", "orthogonal_all"):
+            return nn.initializers.orthogonal(1e-2 if last and self.init == "orthogonal" else math.sqrt(2.0))
         return nn.initializers.lecun_normal()
 
     def bias_init(self, fan_in: int, last: bool):

@@ -41,6 +41,12 @@ def test_torch_init_is_uniform_within_one_over_sqrt_fan_in_and_hidden_bias_const
     orth = MLP((16,), 2, layer_norm=False, arch=Arch(init="orthogonal")).init(jax.random.PRNGKey(0), jnp.ones((1, 8)))
     k = np.asarray(orth["params"]["Dense_0"]["kernel"])  # (8, 16): orthonormal rows scaled by sqrt(2)
     np.testing.assert_allclose(k @ k.T, 2.0 * np.eye(8), atol=1e-5)
+    out = np.asarray(orth["params"]["Dense_1"]["kernel"])  # (16, 2): orthonormal columns scaled by 1e-2
+    np.testing.assert_allclose(out.T @ out, 1e-4 * np.eye(2), atol=1e-8)
+    every = MLP((16,), 2, layer_norm=False, arch=Arch(init="orthogonal_all")).init(jax.random.PRNGKey(0),
+                                                                                    jnp.ones((1, 8)))
+    out = np.asarray(every["params"]["Dense_1"]["kernel"])  # the authors' cql.py: sqrt(2) for the output too
+    np.testing.assert_allclose(out.T @ out, 2.0 * np.eye(2), atol=1e-5)
 
 
 def test_done_flags_per_timeout_mode():

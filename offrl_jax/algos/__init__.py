@@ -62,7 +62,8 @@ ALGOS: dict[str, Algo] = {
     "edac": Algo("sacn"),
     "sacn": Algo("sacn", {"eta": 0.0}, sections=("edac",), skip=("eta",)),  # EDAC's ensemble sizes
     "edac_bc": Algo("sacn", {"bc_weight": 1.0}, sections=("edac",)),
-    # the authors' CQL configs (CORL): cql_min_q_weight 10, policy_lr 3e-5, no entropy in the backup
+    # the authors' CQL configs (their CORL fork's configs/cql/door): cql_min_q_weight 10, policy_lr 3e-5, no entropy in
+    # the backup (CORL's own door/pen configs, added later: cql_alpha 1, policy_lr 1e-4)
     "cql": Algo("sacn", {"num_critics": 2, "eta": 0.0, "cql_alpha": 10.0, "backup_entropy": False,
                          "pretrain": "none", "actor_lr": 3e-5, "simultaneous_update": True}),
     "rebrac": Algo("rebrac"),
@@ -82,9 +83,9 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
     "authors": {
         "td3bc": _AUTHORS_COMMON | {"actor_hidden": (256, 256, 256), "q_scale_eps": 0.0, "bc_target_updates": False},
         "sacn": _AUTHORS_COMMON | {"hidden_bias": 0.1, "tanh_log_det": "eps", "log_alpha_bound": 10.0},
-        # CORL's cql.py as the authors ran it: orthogonal init, log-std offset -1 within [-20, 2], temperature
-        # learning rate = policy learning rate, terminals only in the TD target, no EDAC-style output init
-        "cql": _AUTHORS_COMMON | {"init": "orthogonal", "out_init": False, "log_std_bounds": (-20.0, 2.0),
+        # CORL's cql.py as the authors ran it: orthogonal init of every layer, log-std offset -1 within [-20, 2],
+        # temperature learning rate = policy learning rate, terminals only in the TD target, no EDAC-style output init
+        "cql": _AUTHORS_COMMON | {"init": "orthogonal_all", "out_init": False, "log_std_bounds": (-20.0, 2.0),
                                   "log_std_offset": -1.0, "alpha_lr": 3e-5, "timeouts": "bootstrap"},
     },
 }

@@ -44,7 +44,7 @@ class Config:
     critic_layer_norm: bool = True  # LayerNorm after every hidden layer of the critics (the paper: on)
     layer_norm_affine: bool = True  # learned LN scale/bias; False = the authors' code (elementwise_affine=False)
     layer_norm_eps: float = 1e-6  # flax's default; torch's (the authors') 1e-5
-    init: str = "flax"  # flax (lecun-normal, zero bias), torch (nn.Linear's default) or orthogonal
+    init: str = "flax"  # flax (lecun-normal, zero bias), torch (nn.Linear's default), orthogonal or orthogonal_all
     num_critics: int = 2  # critic ensemble size
     timeouts: str = "bootstrap"  # TD target at a time-out: bootstrap, stop (the authors'), drop the row (CORL's)
     # rewards x 1000 / (max - min episode return) of the dataset before any target or return is computed (CORL's
