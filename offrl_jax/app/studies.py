@@ -15,12 +15,13 @@ from pathlib import Path
 from offrl_jax.algos import ALGOS, PRESETS
 from offrl_jax.algos.config import ONLINE_FIELDS
 from offrl_jax.app.flags import FLAG_FIELDS, add_config_flags, config_values, run_args, sweepable_fields
-from offrl_jax.data.catalogue import KNOWN, LOCOMOTION_ENVS, LOCOMOTION_LEVELS
+from offrl_jax.data.catalogue import KNOWN
+from offrl_jax.data.dataset import LOCOMOTION_ENVS, LOCOMOTION_LEVELS
 from offrl_jax.data.readers import FILE_SUFFIXES
 from offrl_jax.run.study import Study, Variant
 from offrl_jax.system.cli import OneLineParser, UsageError, positive_int
 
-ENVS, LEVELS = LOCOMOTION_ENVS, LOCOMOTION_LEVELS  # the generated locomotion datasets (the catalogue's)
+ENVS, LEVELS = LOCOMOTION_ENVS, LOCOMOTION_LEVELS  # the generated locomotion datasets
 # the Adroit datasets a study with `adroit=True` offers: the catalogue's door datasets (human, cloned)
 ADROIT_LEVELS = {"door": tuple(n.removeprefix("door-") for n in KNOWN if re.fullmatch(r"door-[a-z]+", n))}
 PRETRAIN = ("actor+critic", "actor", "critic", "none")

@@ -21,7 +21,16 @@ import tempfile
 import warnings
 from pathlib import Path
 
-from offrl_jax.data.dataset import DATASET_VERSIONS, Dataset, DatasetError, dataset_dir, is_current, split_version
+from offrl_jax.data.dataset import (
+    DATASET_VERSIONS,
+    LOCOMOTION_ENVS,
+    LOCOMOTION_LEVELS,
+    Dataset,
+    DatasetError,
+    dataset_dir,
+    is_current,
+    split_version,
+)
 from offrl_jax.data.readers import FILE_SUFFIXES, load_dataset_path, minari_root, read_door_npz, read_minari
 from offrl_jax.envs.registry import get_env_spec, normalized_score
 from offrl_jax.system.cli import (
@@ -33,8 +42,6 @@ from offrl_jax.system.cli import (
     seed_int,
 )
 
-# the generated locomotion datasets: <env>-<level> for each env and level (the study flags offer them in this order)
-LOCOMOTION_ENVS = ("hopper", "halfcheetah", "walker2d")
 _LOCOMOTION_KINDS = {
     "medium": "a policy at about 1/3 of expert return",
     "medium-replay": "the replay buffer of training up to the medium policy",
@@ -43,10 +50,9 @@ _LOCOMOTION_KINDS = {
     "expert": "the expert policy",
     "random": "uniformly random actions",
 }
-LOCOMOTION_LEVELS = tuple(_LOCOMOTION_KINDS)
 KNOWN: dict[str, str] = {
-    **{f"{env}-{kind}": f"generated: {env}, {text}" for env in LOCOMOTION_ENVS
-       for kind, text in _LOCOMOTION_KINDS.items()},
+    **{f"{env}-{level}": f"generated: {env}, {_LOCOMOTION_KINDS[level]}" for env in LOCOMOTION_ENVS
+       for level in LOCOMOTION_LEVELS},
     "door-human": "shipped: 25 human demonstrations of Adroit door (6,729 transitions; DAPG, Apache-2.0)",
     "door-cloned": "generated: Adroit door, a behaviour-cloned policy mixed with the human demonstrations",
 }

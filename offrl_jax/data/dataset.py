@@ -97,6 +97,11 @@ def normalize_obs(obs: np.ndarray, mean: np.ndarray, std: np.ndarray) -> np.ndar
     return (obs - mean) / std
 
 
+# the generated locomotion datasets, <env>-<level> for each (the study flags offer the levels in this order; the
+# catalogue describes them, `offrl_jax.data.generate` makes them)
+LOCOMOTION_ENVS = ("hopper", "halfcheetah", "walker2d")
+LOCOMOTION_LEVELS = ("medium", "medium-replay", "full-replay", "medium-expert", "expert", "random")
+
 # Generated datasets whose making changed, with their current version (every other generated dataset is at 0).  An
 # earlier version stays loadable by its Minari id, "<name>-v<N>" (docs/datasets.md, "Versions").
 DATASET_VERSIONS: dict[str, int] = {"hopper-medium": 2, "hopper-medium-expert": 2}

@@ -33,8 +33,14 @@ from typing import Any
 
 import numpy as np
 
-from offrl_jax.data.catalogue import LOCOMOTION_ENVS, LOCOMOTION_LEVELS
-from offrl_jax.data.dataset import Dataset, dataset_dir, is_current, split_version
+from offrl_jax.data.dataset import (
+    LOCOMOTION_ENVS,
+    LOCOMOTION_LEVELS,
+    Dataset,
+    dataset_dir,
+    is_current,
+    split_version,
+)
 from offrl_jax.data.generate.collect import (
     MEDIUM_TARGET_SCORE,
     POLICY_DIR,
@@ -48,7 +54,7 @@ from offrl_jax.envs.registry import get_env_spec
 from offrl_jax.system.cache import cache_dir
 from offrl_jax.system.checkpoint import atomic_write_text
 
-GEN_ENVS, LEVELS = LOCOMOTION_ENVS, LOCOMOTION_LEVELS  # the catalogue's generated locomotion datasets
+GEN_ENVS, LEVELS = LOCOMOTION_ENVS, LOCOMOTION_LEVELS  # the generated locomotion datasets
 DATASET_NAMES = tuple(f"{e}-{lvl}" for e in GEN_ENVS for lvl in LEVELS)
 DEFAULT_TRANSITIONS = 1_000_000
 
