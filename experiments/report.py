@@ -42,20 +42,12 @@ from collections import defaultdict
 from pathlib import Path
 
 from offrl_jax.app.outputs import RUN_FILES, replaced_dir
-from offrl_jax.data import catalogue
 from offrl_jax.run.aggregate import aggregate, aggregate_table, arms, claims_table, not_poolable, plot_aggregate
 from offrl_jax.run.figures import behaviour_score, plot_studies
-from offrl_jax.run.provenance import fingerprint, recorded_data
+from offrl_jax.run.provenance import recorded_data
 from offrl_jax.run.results import check_curve_algos, check_curve_seeds, pretrain_ends_of, read_curves, short_curves
 from offrl_jax.run.study import Study
-from offrl_jax.run.summary import (
-    behaviour_score as of_data,
-    merge_runs,
-    merged_differences,
-    resummarize,
-    summarize,
-    summary_table as table,
-)
+from offrl_jax.run.summary import merge_runs, merged_differences, resummarize, summarize, summary_table as table
 from offrl_jax.system.cli import OneLineParser, being_written, check_writable_dir, check_writable_file, print_error
 
 
@@ -207,13 +199,7 @@ def recorded_behaviour(run: Path, dataset: str) -> float | None:
     `dataset`'s where its fingerprint is the one the run's config.json recorded; None where the run recorded none
     (made before the records) or the cache now holds another version of it (a guess would set a false threshold)."""
     sha = recorded_data(run / "config.json")
-    if sha is None or not catalogue.is_cached(dataset):
-        return None
-    try:
-        ds = catalogue.load(dataset)
-    except Exception:  # noqa: BLE001 -- a threshold is optional; a dataset we cannot read has none
-        return None
-    return of_data(ds) if fingerprint(ds) == sha else None
+    return None if sha is None else behaviour_score(dataset, sha)
 
 
 def curve_table(curves: Path) -> str:
@@ -321,14 +307,15 @@ def main(argv=None) -> int:
                 print(curve_table(path.parent / "curves.csv") + "\n")
             study_dirs.append(path.parent)
             found.append(summary)
+        why = not_poolable(found, [str(d) for d in study_dirs]) if len(found) > 1 else None
         if len(found) > 1:
             print(claims_table(found, [str(d) for d in study_dirs]) + "\n")
-            if arms(found) and (why := not_poolable(found, [str(d) for d in study_dirs])):
+            if arms(found) and why:
                 print(f"No aggregate across these studies: {why}.\n")
             elif arms(found):
                 print(aggregate_table(aggregate(found)) + "\n")
         if args.aggregate is not None:
-            if len(found) > 1 and (why := not_poolable(found, [str(d) for d in study_dirs])):
+            if why:
                 raise ValueError(f"--aggregate: {why}; give studies whose arms are one algorithm and other runs")
             written = plot_aggregate(found, [read_curves(d / "curves.csv") for d in study_dirs], args.aggregate)
             print(f"aggregate figure: {', '.join(map(str, written))}", file=sys.stderr)

@@ -339,8 +339,10 @@ def test_a_run_without_its_behaviour_score_gets_the_cached_data_s_only_where_it_
     from tests.conftest import synthetic_dataset
 
     cached = synthetic_dataset()
-    monkeypatch.setattr(report.catalogue, "is_cached", lambda name: name == "hopper-medium")
-    monkeypatch.setattr(report.catalogue, "load", lambda name: cached)
+    from offrl_jax.data import catalogue
+
+    monkeypatch.setattr(catalogue, "is_cached", lambda name: name == "hopper-medium")
+    monkeypatch.setattr(catalogue, "load", lambda name: cached)
     runs = [] if recorded is None else [run_record(cached if recorded == "same" else synthetic_dataset(seed=1),
                                                    "hopper-medium")]
     (tmp_path / "config.json").write_text(json.dumps({"runs": runs}))

@@ -22,9 +22,11 @@ ALGO_NAMES = {"td3bc": "TD3+BC", "edac": "EDAC", "td3bc_cql": "TD3+BC+CQL", "eda
 
 
 @functools.cache
-def behaviour_score(dataset: str) -> float | None:
-    """The dataset's behaviour score, if the dataset is cached (None otherwise: nothing is generated here)."""
+def behaviour_score(dataset: str, sha256: str | None = None) -> float | None:
+    """The dataset's behaviour score, if the dataset is cached (None otherwise: nothing is generated here) and, with
+    `sha256`, only if the cached data has that fingerprint (`offrl_jax.run.provenance`: the data a run recorded)."""
     from offrl_jax.data import catalogue
+    from offrl_jax.run.provenance import fingerprint
     from offrl_jax.run.summary import behaviour_score as of_data
 
     try:
@@ -33,7 +35,7 @@ def behaviour_score(dataset: str) -> float | None:
         ds = catalogue.load(dataset)
     except Exception:  # noqa: BLE001 -- a reference line is optional; a dataset we cannot read simply has none
         return None
-    return of_data(ds)
+    return of_data(ds) if sha256 is None or fingerprint(ds) == sha256 else None
 
 
 def panel_grid(summaries: list[list[dict]]) -> tuple[list[str], list[str]]:
