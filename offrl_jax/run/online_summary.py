@@ -71,9 +71,10 @@ def summarize_online(rows: list[dict], labels: list[str], seeds: tuple[int, ...]
                 entry[name] = {"per_seed": [float(x) for x in values],
                                "iqm": stats.interval([values], stats.iqm).to_json()}
             entry["reach"] = []
-            from_handover = np.concatenate([c["handover"][:, None], scores], axis=1)  # the hand-over: env step 0
+            at = np.concatenate([[0], steps])  # the hand-over is env step 0
+            from_handover = np.concatenate([c["handover"][:, None], scores], axis=1)
             for name, score in thresholds:
-                reach, censored = stats.first_reach(np.concatenate([[0], steps]), from_handover, score)
+                reach, censored = stats.first_reach(at, from_handover, score)
                 reach = np.where(censored, online_steps, reach)
                 entry["reach"].append({"threshold": name, "score": float(score), "env_steps": reach.tolist(),
                                        "censored": censored.tolist(),
