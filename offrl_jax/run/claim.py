@@ -7,9 +7,9 @@ of the training steps" (Section 6).  `offrl_jax.run.summary` records it in summa
   arm's curve is flat (`stats.trend_is_flat`): per seed the mean of its last 20 % of evaluations minus the mean of
   the 20 % before, whose bootstrap interval over seeds lies within +-5 % of the level (at least 1 point).  On a
   500k-update run evaluated every 5k (100 evaluations) the level is each seed's mean over its last 10 evaluations
-  (455k-500k), and flat means 400k-500k moved less than 5 % from 300k-400k: 20 evaluations a seed in each window,
-  so neither one noisy evaluation nor a slow climb decides it.  A curve still climbing has no asymptote, so no
-  threshold of it, and the tables say so with its trend.
+  (455k-500k), and flat means 400k-500k moved less than 5 % from 300k-400k, 20 evaluations a seed in each window.
+  A curve still climbing has no asymptote, so no threshold of it, and the tables say so with its trend; so has one
+  that swings so much between evaluations that the interval stays wider than the margin (no guess is made).
 - Per seed, the updates (pre-training included) to first reach 90 % and 95 % of it (`stats.first_reach`): where a
   seed got there, the update itself; a seed that never does is censored at the budget, counted and marked.
 - The speed-up (`stats.speedup`): mean updates from scratch / mean updates with pre-training, with its
@@ -122,8 +122,8 @@ def lines(variant: dict) -> list[str]:
     vs = variant.get("vs_reference") or {}
     paper, reference = vs.get("paper"), vs.get("reference")
     head = (f"The paper's measure (Section 6: pre-training reaches the asymptote \"in less than 1/2 of the training "
-            f"steps\", a speed-up above {PAPER_SPEEDUP:g}x): the asymptote is {reference}'s plateau, the mean over "
-            f"seeds of each seed's mean over its last 10 % of evaluations; {plateau_text(variant, reference)}.")
+            f"steps\", a speed-up above {PAPER_SPEEDUP:g}x): the asymptote is {reference}'s plateau, its final score "
+            f"(mean over seeds) where its curve is flat; {plateau_text(variant, reference)}.")
     if not paper:
         return ["", head]
     found = {x["threshold"]: x for x in vs["speedup"]}
