@@ -6,7 +6,10 @@ Per run directory, the study's tables (`offrl_jax.run.summary`): per variant the
 the mean over the run as IQM over seeds with stratified-bootstrap 95 % intervals, the BC level and the improvement
 over it (`offrl_jax.run.bc_level`); against the from-scratch variant,
 every seed's updates to each threshold (censored seeds counted at the budget), the speed-up with its interval, the
-probability of improvement and the verdict on the paper's claim.  A run with config.json and curves.csv is
+probability of improvement and the verdict on the paper's claim; then the paper's own measure (`offrl_jax.run.claim`):
+the updates to 90 % and 95 % of the from-scratch arm's plateau, the speed-up beside the paper's "less than 1/2 of the
+training steps" (a speed-up above 2x), with each arm's final, best and last scores, the BC level and the improvement
+over it, one row per comparison of every study given.  A run with config.json and curves.csv is
 re-summarised from them, so runs made before these statistics existed get them too.  A directory holding several
 studies (sub-directories with a summary.json each) gives one table per study.  `--curves` adds the seed-mean score
 at every evaluation (rows: variants, columns: updates) from the run's curves.csv.
@@ -42,6 +45,7 @@ from collections import defaultdict
 from pathlib import Path
 
 from offrl_jax.app.outputs import RUN_FILES, replaced_dir
+from offrl_jax.run import claim
 from offrl_jax.run.aggregate import aggregate, aggregate_table, arms, claims_table, not_poolable, plot_aggregate
 from offrl_jax.run.figures import behaviour_score, plot_studies
 from offrl_jax.run.provenance import recorded_data
@@ -310,6 +314,9 @@ def main(argv=None) -> int:
         why = not_poolable(found, [str(d) for d in study_dirs]) if len(found) > 1 else None
         if len(found) > 1:
             print(claims_table(found, [str(d) for d in study_dirs]) + "\n")
+        if any(s.get("vs_reference") for summary in found for s in summary):  # the paper's measure, one row each
+            print(claim.claims_table(found, [str(d) for d in study_dirs]) + "\n")
+        if len(found) > 1:
             if arms(found) and why:
                 print(f"No aggregate across these studies: {why}.\n")
             elif arms(found):

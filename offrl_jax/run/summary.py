@@ -12,7 +12,9 @@ Every measure is per seed first (`offrl_jax.run.stats`), then aggregated with a 
   per threshold the seeds that reached it by the BC actor, before any RL update;
 - against the from-scratch reference: the speed-up (reference's mean updates / this variant's) with its interval,
   the probability of improvement of the final score, and whether the paper's claim (fewer updates) holds at the
-  headline threshold: 90 % of the asymptote where there is one, else 90 % of the best score.
+  headline threshold: 90 % of the asymptote where there is one, else 90 % of the best score;
+- the paper's own measure (`offrl_jax.run.claim`): at 90 % and 95 % of the asymptote, whether the speed-up's
+  interval lies above 2x (under 1/2 of the updates, as the paper says), with how the plateau was found.
 """
 from __future__ import annotations
 
@@ -23,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from offrl_jax.run import bc_level, stats
+from offrl_jax.run import bc_level, claim, stats
 from offrl_jax.run.online_summary import online_table, summarize_online
 from offrl_jax.run.provenance import recorded_data
 from offrl_jax.run.results import (
@@ -93,11 +95,11 @@ def _summarize(study: Study, rows: list[dict], pretrain_ends: dict[str, int], be
         updates, seconds, scores = curves[v.label]
         reference = reference_label(study, v.label)
         ref_curve = curves[reference][2] if reference and len(curves[reference][0]) else None
-        asymptote = float(np.nanmean(finals[reference])) if ref_curve is not None else float("nan")
-        trend, flat = stats.trend_is_flat(ref_curve) if ref_curve is not None else (None, False)
+        found = claim.plateau(finals.get(reference), ref_curve)  # the reference's final, an asymptote where flat
+        asymptote, trend, flat = found.level, found.trend, found.flat
         thresholds = ([("behaviour data", behaviour)] if behaviour is not None else []) + [
             (f"{f:.0%} of best", stats.fraction_of(best, f)) for f in FRACTIONS if best is not None] + [
-            (f"{f:.0%} of asymptote", stats.fraction_of(asymptote, f)) for f in FRACTIONS if flat] + (
+            (claim.threshold_name(f), stats.fraction_of(asymptote, f)) for f in FRACTIONS if flat] + (
             bc_level.thresholds(shared.get(v.label), best))
         config = study.config(v.label)
         mean_curve = np.nanmean(scores, axis=0) if len(updates) else np.array([np.nan])
@@ -169,43 +171,16 @@ def compare(mine: dict, ref: dict) -> dict:
                          "censored": sum(a["censored"]), "reference_censored": sum(b["censored"]),
                          "by_bc_actor": sum(a.get("by_bc_actor") or []), "seeds": len(a["censored"])})
     names = [s["threshold"] for s in speedups]
-    headline = "90% of asymptote" if "90% of asymptote" in names else "90% of best" if "90% of best" in names else None
+    headline = claim.threshold_name(0.9) if claim.threshold_name(0.9) in names else (
+        "90% of best" if "90% of best" in names else None)
     return {"reference": ref["variant"], "speedup": speedups, "headline": headline,
-            "verdict": verdict(speedups[names.index(headline)] if headline else None, len(mine["seeds"])),
+            "verdict": claim.verdict(speedups[names.index(headline)] if headline else None, len(mine["seeds"])),
+            # the paper's measure: at 90 % and 95 % of a flat asymptote, under 1/2 of the updates (a speed-up > 2x)?
+            "paper": claim.paper_measure(speedups, len(mine["seeds"])),
             "poi_final": stats.probability_of_improvement(np.array(mine["final_scores"], float),
                                                           np.array(ref["final_scores"], float)).to_json(),
             "poi_auc": stats.probability_of_improvement(np.array(mine["auc_scores"], float),
                                                         np.array(ref["auc_scores"], float)).to_json()}
-
-
-def verdict(speedup: dict | None, seeds: int) -> str:
-    """Whether a variant reaches the headline threshold in fewer updates than its reference (for pre-training
-    against from scratch: the paper's claim): 'holds' when the speed-up's interval lies above 1, 'does not hold'
-    when it lies at or below 1, else 'undecided: <why>'.  A censored seed counts at the budget, so the ratio is a
-    lower bound where only the reference has censored seeds (it may hold, never fail), an upper bound where only
-    the variant has (it may fail, never hold), and neither where both have (undecided)."""
-    if speedup is None:
-        return "undecided: no threshold"
-    if seeds < 2:
-        return "undecided: one seed, no interval"
-    ratio = stats.Estimate.from_json(speedup["updates"])
-    mine, ref = speedup["censored"], speedup["reference_censored"]
-    if mine == ref == seeds:
-        return "undecided: neither arm reaches the threshold"
-    if mine and ref:
-        return "undecided: both arms have censored seeds"
-    if ratio.low is None or ratio.high is None:
-        return "undecided"
-    if ratio.low > 1 and not mine:
-        return "holds"
-    if ratio.high <= 1 and not ref:
-        return "does not hold"
-    return ("undecided: the interval holds 1" if ratio.low <= 1 < ratio.high else
-            "undecided: censored seeds bound the ratio from one side only")
-
-
-VERDICT_WORDS = {"holds": "yes (the speed-up's interval lies above 1)",
-                 "does not hold": "no (the speed-up's interval lies at or below 1)"}
 
 
 def summary_json(summary: list[dict]) -> str:
@@ -286,7 +261,9 @@ def summary_table(summary: list[dict]) -> str:
         lines += ["", f"Probability that {s['variant']} beats {ref['variant']}: final score "
                       f"{_est(vs['poi_final'], '.2f')}, mean over the run {_est(vs['poi_auc'], '.2f')}. "
                       f"{s['variant']} needs fewer updates than {ref['variant']} to reach "
-                      f"{vs['headline'] or 'a threshold'}: {VERDICT_WORDS.get(vs['verdict'], vs['verdict'])}."]
+                      f"{vs['headline'] or 'a threshold'}: "
+                      f"{claim.VERDICT_WORDS.get(vs['verdict'], vs['verdict'])}."]
+        lines += claim.lines(s)
     lines += online_table([s["online"] for s in summary if s.get("online")])
     return "\n".join(lines)
 
