@@ -7,9 +7,10 @@ the mean over the run as IQM over seeds with stratified-bootstrap 95 % intervals
 over it (`offrl_jax.run.bc_level`); against the from-scratch variant,
 every seed's updates to each threshold (censored seeds counted at the budget), the speed-up with its interval, the
 probability of improvement and the verdict on the paper's claim; then the paper's own measure (`offrl_jax.run.claim`):
-the updates to 90 % and 95 % of the from-scratch arm's plateau, the speed-up beside the paper's "less than 1/2 of the
-training steps" (a speed-up above 2x), with each arm's final, best and last scores, the BC level and the improvement
-over it, one row per comparison of every study given.  A run with config.json and curves.csv is
+each seed's sustained reach of 90 % and 95 % of the from-scratch arm's plateau (the first update at which its
+trailing mean over the plateau's window is there), the plateau test, the speed-up beside the paper's "less than 1/2
+of the training steps" (a speed-up above 2x), with each arm's final, best and last scores, the BC level and the
+improvement over it, one row per comparison of every study given.  A run with config.json and curves.csv is
 re-summarised from them, so runs made before these statistics existed get them too.  A directory holding several
 studies (sub-directories with a summary.json each) gives one table per study.  `--curves` adds the seed-mean score
 at every evaluation (rows: variants, columns: updates) from the run's curves.csv.

@@ -44,19 +44,53 @@ def test_the_plateau_is_the_mean_final_and_counts_only_where_flat():
     # one evaluation per window (20 % of 5): 90 - 90 and 100 - 100, a change of 0 on both seeds
     found = claim.plateau(np.array([90.0, 100.0, nan]), flat)
     assert (found.level, found.trend, found.flat) == (95.0, stats.Estimate(0.0, 0.0, 0.0), True)  # NaN: left out
+    # flat, but on 1 evaluation a side: too few for the paper's measure; its margin is 5 % of (90 + 100) / 2
+    assert found.per_side == 1 and found.margin == pytest.approx(4.75) and not found.paper
     climbing = np.array([[10, 20, 30, 40, 50]] * 2, float)
     found = claim.plateau(np.array([50.0, 50.0]), climbing)
     assert found.level == 50.0 and found.trend.value == 10.0 and not found.flat  # 50 - 40 > max(5 % of 50, 1)
     none = claim.plateau(None, None)  # no reference arm
-    assert np.isnan(none.level) and none.trend is None and not none.flat
+    assert np.isnan(none.level) and none.trend is None and not none.flat and not none.paper
 
 
-def test_the_measure_is_read_only_at_a_flat_asymptote():
-    entry = _speedup([30, 30], [10, 10])
-    assert claim.paper_measure([entry | {"threshold": "90% of best"}], 2) is None  # no asymptote, no measure
-    both = [entry, entry | {"threshold": "95% of asymptote"}, entry | {"threshold": "80% of asymptote"}]
-    assert claim.paper_measure(both, 2) == {"speedup_above": 2.0, "verdicts": {"90% of asymptote": "holds",
-                                                                              "95% of asymptote": "holds"}}
+def test_the_paper_s_measure_needs_ten_evaluations_a_side_to_call_a_plateau_flat():
+    # 48 evaluations: round(0.2 * 48) = 10 a side, the fewest that count; 47: round(9.4) = 9
+    for evaluations, counts in ((47, False), (48, True)):
+        level = np.full((2, evaluations), 60.0)
+        found = claim.plateau(level[:, -1], level)
+        assert found.flat and found.per_side == (10 if counts else 9) and found.paper == counts
+        assert found.margin == 3.0  # 5 % of 60
+    # a curve of 4 evaluations (ReBRAC walker2d's committed run): 1 a side, "too few evaluations" with the change
+    found = claim.plateau(np.array([70.0, 74.0]), np.array([[60, 70, 70, 70], [60, 74, 74, 74]], float))
+    assert found.flat and not found.paper
+    variant = {"asymptote": found.level, "asymptote_trend": found.trend.to_json(), "asymptote_flat": found.flat,
+               "asymptote_per_side": found.per_side, "asymptote_margin": found.margin, "paper_asymptote": found.paper}
+    # the last evaluation against the one before: 0 and 0, margin 5 % of 72 = 3.6
+    assert claim.plateau_test(variant) == "too few evaluations: 1 a side, 10 needed (+0.0 [+0.0, +0.0], ±3.6)"
+    assert claim._plateau_cell(variant) == "none (72.0)"
+    assert claim.plateau_text(variant, "scratch") == (
+        "scratch's final 72.0; too few evaluations: 1 a side, 10 needed (+0.0 [+0.0, +0.0], ±3.6): no asymptote")
+
+
+def _reach(updates, censored=None, window=3) -> list[dict]:
+    """A variant's sustained reach of 90 % and 95 % of an asymptote of 100, the same updates at both."""
+    censored = censored or [False] * len(updates)
+    return [{"threshold": claim.threshold_name(f), "score": 100 * f, "window": window, "updates": updates,
+             "censored": censored} for f in claim.PAPER_FRACTIONS]
+
+
+def test_the_measure_is_read_only_at_an_asymptote_from_the_sustained_reach():
+    assert claim.paper_measure([], _reach([30, 30]), 2) is None  # no asymptote, no measure
+    # scratch 30k and 30k, pre-trained 10k and 10k: 3x on every resample, above 2
+    found = claim.paper_measure(_reach([10, 10]), _reach([30, 30]), 2)
+    assert found["window"] == 3 and found["verdicts"] == {"90% of asymptote": "holds", "95% of asymptote": "holds"}
+    assert found["speedup"][0]["updates"] == {"value": 3.0, "low": 3.0, "high": 3.0}
+    # a scratch seed censored at the budget (20): 17.5 / 10 = 1.75x, its interval [15 / 10, 20 / 10] at or below 2,
+    # but a lower bound: the true ratio may be above 2, so no "does not hold"
+    found = claim.paper_measure(_reach([10, 10]), _reach([15, 20], [False, True]), 2)
+    assert found["speedup"][0]["reference_censored"] == 1
+    assert found["speedup"][0]["updates"] == {"value": 1.75, "low": 1.5, "high": 2.0}
+    assert found["verdicts"]["90% of asymptote"] == "undecided: censored seeds bound the ratio from one side only"
 
 
 EVERY, BUDGET = 5000, 500_000  # the paper's budget for TD3+BC on hopper and walker2d, an evaluation every 5k
@@ -94,29 +128,45 @@ def test_a_two_arm_run_at_the_paper_s_budget_by_hand(tmp_path, capsys):
 
     run = two_arm_run(tmp_path / "run", two_arm_rows())
     summary = {s["variant"]: s for s in summarize(STUDY, two_arm_rows(), {"pretrained": 10_000})}
-    # scratch ends at 100 on both seeds, 305k-400k and 405k-500k alike: flat, an asymptote of 100
+    # scratch ends at 100 on both seeds, 305k-400k and 405k-500k alike (20 evaluations a side): flat, an asymptote
+    # of 100 for the paper's measure too
     pre = summary["pretrained"]
     assert pre["asymptote"] == 100 and pre["asymptote_flat"] and pre["asymptote_trend"]["value"] == 0
+    assert pre["asymptote_per_side"] == 20 and pre["asymptote_margin"] == 5.0 and pre["paper_asymptote"]
+    # the study tables' reach (first evaluation at the threshold) is unchanged: 50k and 60k, 250k / 55k = 4.55x
     by = {r["threshold"]: r for r in pre["reach"]}
     assert by["90% of asymptote"]["score"] == 90 and by["95% of asymptote"]["score"] == 95
     assert by["90% of asymptote"]["updates"] == [50_000, 60_000] and not any(by["90% of asymptote"]["censored"])
-    # scratch gets there at 200k and 300k: 250k / 55k = 4.55x; a resample's means are 200k-300k over 50k-60k, each
-    # end with probability 1/4, so the interval is [200/60, 300/50]: wholly above 2, under 1/2 of the updates
-    paper = pre["vs_reference"]["paper"]
-    assert paper == {"speedup_above": 2.0, "verdicts": {"90% of asymptote": "holds", "95% of asymptote": "holds"}}
     ratio = {x["threshold"]: x for x in pre["vs_reference"]["speedup"]}["90% of asymptote"]["updates"]
-    assert ratio["value"] == pytest.approx(250 / 55) and ratio["low"] == pytest.approx(200 / 60)
-    assert ratio["high"] == pytest.approx(300 / 50)
+    assert ratio["value"] == pytest.approx(250 / 55)
+    # the paper's measure: sustained reach, the mean of the last 10 evaluations (as many as the level averages).
+    # Pre-trained seed 0 is at 70 until 45k, 100 from 50k: a window ending k evaluations into the 100s averages
+    # 70 + 3 k, at or above 90 from k = 7 (91), at 80k, and at or above 95 from k = 9 (97), at 90k; seed 1, 10k
+    # later.  Scratch, 50 then 100: 50 + 5 k, 90 at k = 8 and 95 at k = 9: 235k / 240k (seed 0), 335k / 340k.
+    sustained = {r["threshold"]: r["updates"] for r in pre["sustained_reach"]}
+    assert sustained == {"90% of asymptote": [80_000, 90_000], "95% of asymptote": [90_000, 100_000]}
+    scratch = {r["threshold"]: r["updates"] for r in summary["scratch"]["sustained_reach"]}
+    assert scratch == {"90% of asymptote": [235_000, 335_000], "95% of asymptote": [240_000, 340_000]}
+    # 285k / 85k = 3.35x at 90 %; a resample's means run from 235k to 335k over 80k to 90k, each end with
+    # probability 1/4, so its interval is [235/90, 335/80]: wholly above 2, under 1/2 of the updates
+    paper = pre["vs_reference"]["paper"]
+    assert paper["window"] == 10 and paper["verdicts"] == {"90% of asymptote": "holds", "95% of asymptote": "holds"}
+    ratio = paper["speedup"][0]["updates"]
+    assert ratio["value"] == pytest.approx(285 / 85) and ratio["low"] == pytest.approx(235 / 90)
+    assert ratio["high"] == pytest.approx(335 / 80)
     text = summary_table(list(summary.values()))
-    assert "| 90% of asymptote | 90.0 | 4.55x [3.33, 6.00] | > 2x | yes |" in text
-    assert "scratch's final 100.0, flat (trend +0.0 [+0.0, +0.0] over the last 20 % of evaluations" in text
+    assert "| 90% of asymptote | 90.0 | 80k 90k | 235k 335k | 3.35x [2.61, 4.19] | > 2x | yes |" in text
+    assert "| 95% of asymptote | 95.0 | 90k 100k | 240k 340k | 3.05x [2.40, 3.78] | > 2x | yes |" in text
+    assert "scratch's final 100.0; flat: +0.0 [+0.0, +0.0] within ±5.0 (20 a side): an asymptote." in text
+    assert "the first update (pre-training included) at which the mean of its last 10 evaluations" in text
     # the report: the study's tables, then one row of the paper's measure; the BC level is the hand-over's 70, each
     # arm ends 30 above it
     assert report.main([str(run), "--no-reference"]) == 0
     out = capsys.readouterr().out
-    assert (f"| {run} | pretrained vs scratch | 2 | 100.0 (90.0, 95.0) | 4.55x [3.33, 6.00] | 4.55x [3.33, 6.00] | "
-            "< 1/2 of the updates (> 2x) | yes / yes | 100.0 / 100.0 | 100.0 / 100.0 | 100.0 / 100.0 | "
-            "+30.0 [+30.0, +30.0] / +30.0 [+30.0, +30.0] | 70.0 (pretrained at 10,000) |") in out
+    assert (f"| {run} | pretrained vs scratch | 2 | 100.0 (90.0, 95.0) | flat: +0.0 [+0.0, +0.0] within ±5.0 "
+            "(20 a side) | 3.35x [2.61, 4.19] | 3.05x [2.40, 3.78] | < 1/2 of the updates (> 2x) | yes / yes | "
+            "100.0 / 100.0 | 100.0 / 100.0 | 100.0 / 100.0 | +30.0 [+30.0, +30.0] / +30.0 [+30.0, +30.0] | "
+            "70.0 (pretrained at 10,000) |") in out
     assert "Across" not in out  # one study: no aggregate across studies
 
 
@@ -125,13 +175,13 @@ def test_a_scratch_arm_still_climbing_has_no_asymptote_and_no_measure(tmp_path, 
 
     # seed 1 of scratch steps up at 475k: its last 20 % (405k-500k: 14 evaluations at 50, 6 at 100) averages 65
     # against 50 before, a change of 15; seed 0's is 0, so the mean is 7.5 and its interval [0, 15] reaches past
-    # 5 % of the level (81.25 -> 4.1): not flat.  Its final (455k-500k): 80 and 100, a mean of 90.
+    # the margin, 5 % of (100 + 65) / 2 = 4.125: not flat.  Its final (455k-500k): 80 and 100, a mean of 90.
     run = two_arm_run(tmp_path / "run", two_arm_rows(scratch_steps=(200_000, 475_000)))
     assert report.main([str(run), "--no-reference"]) == 0
     out = capsys.readouterr().out
-    assert (f"| {run} | pretrained vs scratch | 2 | none (90.0, trend +7.5 [+0.0, +15.0]) | n/a | n/a | "
-            "< 1/2 of the updates (> 2x) | n/a |") in out
-    assert "not flat (trend +7.5 [+0.0, +15.0] over the last 20 % of evaluations): no asymptote." in out
+    assert (f"| {run} | pretrained vs scratch | 2 | none (90.0) | not flat: +7.5 [+0.0, +15.0], not within ±4.1 "
+            "(20 a side) | n/a | n/a | < 1/2 of the updates (> 2x) | n/a |") in out
+    assert "scratch's final 90.0; not flat: +7.5 [+0.0, +15.0], not within ±4.1 (20 a side): no asymptote." in out
 
 
 def test_a_500k_run_is_drawn_on_its_whole_update_axis(tmp_path, monkeypatch):

@@ -91,6 +91,30 @@ def test_a_flat_trend_must_be_flat_within_five_percent_not_merely_noisy():
     assert stats.trend_is_flat(np.ones((2, 1))) == (None, False)  # too few evaluations for two windows
 
 
+def test_a_running_mean_is_trailing_and_has_none_before_a_full_window():
+    scores = np.array([[1, 2, 3, 4, 5], [0, 0, 9, 0, 0]], dtype=float)
+    means = stats.running_mean(scores, 3)  # evaluation j averages evaluations j - 2 .. j
+    assert np.isnan(means[:, :2]).all()  # the first two have fewer than 3 before them
+    assert means[0, 2:].tolist() == [2.0, 3.0, 4.0] and means[1, 2:].tolist() == [3.0, 3.0, 3.0]
+    # a NaN (a seed that diverged) spoils the windows that hold it, and only those
+    gap = stats.running_mean(np.array([[1, np.nan, 3, 4, 6]]), 2)
+    assert np.isnan(gap[0, :3]).all() and gap[0, 3:].tolist() == [3.5, 5.0]
+    assert np.isnan(stats.running_mean(scores, 6)).all()  # a window longer than the curve: no mean anywhere
+    assert stats.running_mean(scores, 1).tolist() == scores.tolist()
+
+
+def test_a_sustained_reach_needs_the_running_mean_there_not_one_lucky_evaluation():
+    updates = np.array([10, 20, 30, 40, 50, 60])
+    scores = np.array([[0, 100, 0, 0, 0, 0],      # one lucky evaluation at 20, then nothing
+                       [0, 0, 90, 90, 90, 90]], dtype=float)
+    at, censored = stats.first_reach(updates, scores, 90)
+    assert at.tolist() == [20, 30] and not censored.any()  # the first evaluation at 90: the lucky one counts
+    # window 3: seed 0's means 33.3, 33.3, 0, 0 never reach 90 (censored at the last update, 60); seed 1's are
+    # (0 + 0 + 90) / 3 = 30 at 30, 60 at 40, 90 at 50: there at 50, when its last three evaluations average 90
+    at, censored = stats.sustained_reach(updates, scores, 90, 3)
+    assert at.tolist() == [60, 50] and censored.tolist() == [True, False]
+
+
 def test_performance_profile_is_the_fraction_above_each_tau():
     profile = stats.performance_profile(np.array([10.0, 50, 90, 90]), np.array([0.0, 50, 89, 90]))
     assert profile.tolist() == [1.0, 0.5, 0.5, 0.0]

@@ -3,16 +3,28 @@ of the training steps" (Section 6).  `offrl_jax.run.summary` records it in summa
 `claims_table` gives one row per comparison across studies (`experiments.report`, `results/claims.sh`).
 
 - The asymptote (`plateau`): the from-scratch (reference) arm's final score (per seed the mean of its last 10 % of
-  evaluations, or of the study's final window; averaged over seeds), and it counts as a plateau only where that
-  arm's curve is flat (`stats.trend_is_flat`): per seed the mean of its last 20 % of evaluations minus the mean of
-  the 20 % before, whose bootstrap interval over seeds lies within +-5 % of the level (at least 1 point).  On a
-  500k-update run evaluated every 5k (100 evaluations) the level is each seed's mean over its last 10 evaluations
-  (455k-500k), and flat means 400k-500k moved less than 5 % from 300k-400k, 20 evaluations a seed in each window.
-  A curve still climbing has no asymptote, so no threshold of it, and the tables say so with its trend; so has one
-  that swings so much between evaluations that the interval stays wider than the margin (no guess is made).
-- Per seed, the updates (pre-training included) to first reach 90 % and 95 % of it (`stats.first_reach`): where a
-  seed got there, the update itself; a seed that never does is censored at the budget, counted and marked.
-- The speed-up (`stats.speedup`): mean updates from scratch / mean updates with pre-training, with its
+  evaluations, or of the study's final window; averaged over seeds), and it counts as one only where that arm's
+  curve is flat (`stats.trend_is_flat`): per seed the mean of its last 20 % of evaluations minus the mean of the
+  20 % before, whose bootstrap interval over seeds lies within +-5 % of the level (at least 1 point), on at least
+  `MIN_PER_SIDE` (10) evaluations a side, so at least 48 evaluations (`Plateau.paper`; the study tables' own
+  asymptote thresholds take the test without that minimum).  On a 500k-update run evaluated every 5k (100
+  evaluations) the level is each seed's mean over its last 10 evaluations (455k-500k), and flat means 400k-500k
+  moved less than 5 % from 300k-400k, 20 evaluations a seed in each window.  A curve still climbing has no
+  asymptote, nor has one that swings so much that the interval stays wider than the margin (no guess is made), nor
+  one with too few evaluations; the tables print the change measured, its interval, the margin and the
+  evaluations a side, so a reader sees why.
+- Sustained reach (`sustained_reach`, `stats.sustained_reach`): per seed, the first update (pre-training included)
+  at which the trailing mean of its evaluations over a window is at or above 90 % (95 %) of the asymptote.  The
+  window is as many evaluations as the level averages (`window`: the last 10 %, at least `MIN_WINDOW`, 3): 10 on
+  that 500k run, so the mean at 50k averages the evaluations 5k-50k.  Trailing, not centred, so the update counted
+  is one the seed has been trained to, its score held over the evaluations before it, never helped by a later
+  one.  The first window - 1 evaluations have no mean (too few before them), so no seed can count before the
+  window's last evaluation (50k there), and no speed-up above budget / that update (10x) can be measured: both
+  arms pay that floor and the window's lag, which pull the ratio towards 1, against the claim.  The last
+  evaluation's mean is a full window like any other.  A seed whose mean never gets there (or diverged: NaN) is
+  censored at its last update, counted and marked.  One lucky evaluation cannot make a reach: on noisy curves the
+  first evaluation at the threshold (the study tables' reach) favours the claim.
+- The speed-up (`stats.speedup`): mean sustained-reach updates from scratch / with pre-training, with its
   stratified-bootstrap interval.  The paper's "less than 1/2 of the training steps" is a speed-up above 2x
   (`PAPER_SPEEDUP`): "yes" only where the interval lies wholly above 2, "no" only where it lies wholly at or below
   2, undecided otherwise (`verdict`, whose censoring rules make a censored seed bound the ratio from one side only).
@@ -31,6 +43,8 @@ from offrl_jax.run import bc_level, stats
 
 PAPER_SPEEDUP = 2.0  # "in less than 1/2 of the training steps": a speed-up above 2x
 PAPER_FRACTIONS = (0.9, 0.95)  # the fractions of the asymptote the paper's measure is read at
+MIN_PER_SIDE = 10  # evaluations in each window of the flatness test before the paper's measure calls a plateau flat
+MIN_WINDOW = 3  # the fewest evaluations a sustained reach averages
 
 
 def threshold_name(fraction: float) -> str:
@@ -41,10 +55,18 @@ def threshold_name(fraction: float) -> str:
 @dataclasses.dataclass(frozen=True)
 class Plateau:
     """The reference arm's plateau: its mean final score (`level`, NaN without a reference), the trend of its last
-    evaluations (None: too few) and whether that trend is flat (only then is the level an asymptote)."""
+    evaluations (None: too few), whether that trend is flat (the study tables' asymptote thresholds), the
+    evaluations on each side of the test (`per_side`) and its margin (5 % of the level, at least 1 point)."""
     level: float
     trend: stats.Estimate | None
     flat: bool
+    per_side: int = 0
+    margin: float = float("nan")
+
+    @property
+    def paper(self) -> bool:
+        """An asymptote for the paper's measure: flat, on at least `MIN_PER_SIDE` evaluations a side."""
+        return self.flat and self.per_side >= MIN_PER_SIDE
 
 
 def plateau(finals: np.ndarray | None, curve: np.ndarray | None) -> Plateau:
@@ -54,7 +76,33 @@ def plateau(finals: np.ndarray | None, curve: np.ndarray | None) -> Plateau:
     trend, flat = stats.trend_is_flat(curve)
     finite = np.asarray(finals, dtype=float)
     finite = finite[np.isfinite(finite)]
-    return Plateau(float(finite.mean()) if len(finite) else float("nan"), trend, flat)
+    k = stats.trend_window(np.shape(curve)[1]) if trend is not None else 0
+    return Plateau(float(finite.mean()) if len(finite) else float("nan"), trend, flat, k,
+                   stats.flat_margin(curve, k) if k else float("nan"))
+
+
+def window(final_evaluations: int) -> int:
+    """The sustained reach's window: as many evaluations as the plateau level averages (`final_evaluations`, the
+    last 10 % of them), at least `MIN_WINDOW`."""
+    return max(MIN_WINDOW, int(final_evaluations))
+
+
+def sustained_reach(updates: np.ndarray, scores: np.ndarray, found: Plateau, evaluations: int,
+                    level: bc_level.BCLevel | None, label: str) -> list[dict]:
+    """A variant's sustained reach of 90 % and 95 % of the asymptote `found` (none unless `found.paper`): per seed
+    the updates (`stats.sustained_reach` over `evaluations`), censored seeds, the window and, where the variant has
+    a BC level of its own, the seeds whose running mean got there by the hand-over."""
+    if not found.paper or not len(updates):
+        return []
+    out = []
+    for f in PAPER_FRACTIONS:
+        score = stats.fraction_of(found.level, f)
+        at, censored = stats.sustained_reach(updates, scores, score, evaluations)
+        out.append({"threshold": threshold_name(f), "score": score, "window": evaluations, "updates": at.tolist(),
+                    "censored": censored.tolist()})
+        if (by_bc := bc_level.by_bc_actor(at, censored, level, label)) is not None:
+            out[-1]["by_bc_actor"] = by_bc
+    return out
 
 
 def verdict(speedup: dict | None, seeds: int, bar: float = 1.0) -> str:
@@ -88,15 +136,21 @@ VERDICT_WORDS = {"holds": "yes (the speed-up's interval lies above 1)",
 SHORT = {"holds": "yes", "does not hold": "no"}
 
 
-def paper_measure(speedups: list[dict], seeds: int) -> dict | None:
-    """summary.json's "paper" entry of a comparison (`summary.compare`'s `speedups`, one per threshold): per
-    fraction of the asymptote the verdict against `PAPER_SPEEDUP`; None where the reference has no asymptote."""
-    found = {x["threshold"]: x for x in speedups}
-    names = [threshold_name(f) for f in PAPER_FRACTIONS if threshold_name(f) in found]
-    if not names:
+def paper_measure(mine: list[dict], reference: list[dict], seeds: int) -> dict | None:
+    """summary.json's "paper" entry of a comparison, from the variant's and the reference's `sustained_reach`: per
+    threshold the speed-up (reference / variant, censored seeds at the budget) and its verdict against
+    `PAPER_SPEEDUP`; None where the reference has no asymptote for the paper's measure."""
+    if not mine or not reference:
         return None
-    return {"speedup_above": PAPER_SPEEDUP,
-            "verdicts": {name: verdict(found[name], seeds, PAPER_SPEEDUP) for name in names}}
+    speedups = []
+    for a, b in zip(mine, reference):
+        assert a["threshold"] == b["threshold"], (a["threshold"], b["threshold"])
+        speedups.append({"threshold": a["threshold"], "score": a["score"],
+                         "updates": stats.speedup(np.array(b["updates"]), np.array(a["updates"])).to_json(),
+                         "censored": sum(a["censored"]), "reference_censored": sum(b["censored"]),
+                         "by_bc_actor": sum(a.get("by_bc_actor") or []), "seeds": len(a["censored"])})
+    return {"speedup_above": PAPER_SPEEDUP, "window": mine[0]["window"], "speedup": speedups,
+            "verdicts": {x["threshold"]: verdict(x, seeds, PAPER_SPEEDUP) for x in speedups}}
 
 
 # ------------------------------------------------------------------------------------------------------- text
@@ -104,34 +158,58 @@ def _number(x, fmt: str = ".1f") -> str:
     return f"{x:{fmt}}" if isinstance(x, (int, float)) and math.isfinite(x) else "n/a"
 
 
-def plateau_text(variant: dict, reference: str) -> str:
-    """How the plateau of `variant`'s reference (named `reference`) was found: "scratch's final 95.1, flat (trend +0.4
-    [-1.2, 2.0] over the last 20 % of evaluations, within +-5 %): an asymptote", or why there is none."""
-    trend = variant.get("asymptote_trend")
-    head = f"{reference}'s final {_number(variant.get('asymptote'))}"
+def plateau_test(variant: dict) -> str:
+    """The flatness test of `variant`'s reference as the paper's measure reads it: "flat: +0.4 [-1.2, +2.0] within
+    +-4.8 (12 a side)", "not flat: +3.2 [+1.0, +5.0], not within +-2.2 (12 a side)" or "too few evaluations: 1 a side,
+    10 needed (+3.2 [+1.0, +5.0], +-2.2)": the change of the last 20 % of evaluations against the 20 % before [95 %
+    CI], the margin and the evaluations in each window."""
+    trend, k = variant.get("asymptote_trend"), variant.get("asymptote_per_side") or 0
     if not trend:
-        return head + ", too few evaluations to test for a plateau: no asymptote"
-    change = stats.Estimate.from_json(trend).text("+.1f")
+        return "too few evaluations"
+    change, margin = stats.Estimate.from_json(trend).text("+.1f"), f"±{_number(variant.get('asymptote_margin'))}"
+    if k < MIN_PER_SIDE:
+        return f"too few evaluations: {k} a side, {MIN_PER_SIDE} needed ({change}, {margin})"
     if variant.get("asymptote_flat"):
-        return head + f", flat (trend {change} over the last 20 % of evaluations, within +-5 %): an asymptote"
-    return head + f", not flat (trend {change} over the last 20 % of evaluations): no asymptote"
+        return f"flat: {change} within {margin} ({k} a side)"
+    return f"not flat: {change}, not within {margin} ({k} a side)"
 
 
-def lines(variant: dict) -> list[str]:
-    """The per-study paragraph and table of the paper's measure for `variant` against its reference."""
+def plateau_text(variant: dict, reference: str) -> str:
+    """How the plateau of `variant`'s reference (named `reference`) was found: "scratch's final 95.1; flat: +0.4
+    [-1.2, +2.0] within +-4.8 (12 a side): an asymptote", or why there is none."""
+    return (f"{reference}'s final {_number(variant.get('asymptote'))}; {plateau_test(variant)}: "
+            + ("an asymptote" if variant.get("paper_asymptote") else "no asymptote"))
+
+
+def _per_seed(reach: dict) -> str:
+    """'10k 10k >40k' (a censored seed as >budget) and the censored count."""
+    k = lambda u: f"{u / 1000:g}k" if u >= 1000 else str(u)  # noqa: E731
+    cells = [f">{k(u)}" if c else k(u) for u, c in zip(reach["updates"], reach["censored"])]
+    return " ".join(cells) + (f" ({sum(reach['censored'])} censored)" if any(reach["censored"]) else "")
+
+
+def lines(variant: dict, reference: dict) -> list[str]:
+    """The per-study paragraph and table of the paper's measure for `variant` against its `reference`."""
     vs = variant.get("vs_reference") or {}
-    paper, reference = vs.get("paper"), vs.get("reference")
+    paper, name = vs.get("paper"), reference["variant"]
     head = (f"The paper's measure (Section 6: pre-training reaches the asymptote \"in less than 1/2 of the training "
-            f"steps\", a speed-up above {PAPER_SPEEDUP:g}x): the asymptote is {reference}'s plateau, its final score "
-            f"(mean over seeds) where its curve is flat; {plateau_text(variant, reference)}.")
-    if not paper:
+            f"steps\", a speed-up above {PAPER_SPEEDUP:g}x): the asymptote is {name}'s plateau, its final score "
+            f"(mean over seeds) where its curve is flat, the change of its last 20 % of evaluations against the 20 % "
+            f"before [95 % CI] within ±5 % of the level on at least {MIN_PER_SIDE} evaluations a side; "
+            f"{plateau_text(variant, name)}.")
+    if not paper or "speedup" not in paper:
         return ["", head]
-    found = {x["threshold"]: x for x in vs["speedup"]}
-    out = ["", head + " Per-seed updates: the rows above.", "",
-           "| threshold | score | speed-up (updates) | paper | under 1/2 of the updates? |", "|---|--:|--:|--:|---|"]
-    for name, said in paper["verdicts"].items():
-        x = found[name]
-        out.append(f"| {name} | {x['score']:.1f} | {bc_level.speedup_text(x)} | > {PAPER_SPEEDUP:g}x | "
+    out = ["", head + f" Sustained reach: per seed the first update (pre-training included) at which the mean of its "
+           f"last {paper['window']} evaluations is at or above the threshold; a seed whose mean never is is censored "
+           "at the budget.", "",
+           f"| threshold | score | {variant['variant']} | {name} | speed-up (updates) | paper | "
+           "under 1/2 of the updates? |", "|---|--:|--:|--:|--:|--:|---|"]
+    mine = {r["threshold"]: r for r in variant.get("sustained_reach") or []}
+    theirs = {r["threshold"]: r for r in reference.get("sustained_reach") or []}
+    for x in paper["speedup"]:
+        said = paper["verdicts"][x["threshold"]]
+        out.append(f"| {x['threshold']} | {x['score']:.1f} | {_per_seed(mine[x['threshold']])} | "
+                   f"{_per_seed(theirs[x['threshold']])} | {bc_level.speedup_text(x)} | > {PAPER_SPEEDUP:g}x | "
                    f"{SHORT.get(said, said)} |")
     return out
 
@@ -153,32 +231,33 @@ def _arms(variant: dict, ref: dict) -> str:
 
 
 def _plateau_cell(variant: dict) -> str:
-    """'95.1 (86.2, 90.9)': the asymptote and its 90 % and 95 % thresholds where the reference's final is flat, else
-    'none (43.8, trend +3.2 [1.0, 5.0])'."""
-    level, trend = _number(variant.get("asymptote")), variant.get("asymptote_trend")
-    if variant.get("asymptote_flat"):
-        found = {r["threshold"]: r["score"] for r in variant["reach"]}
-        return level + " (" + ", ".join(_number(found.get(threshold_name(f))) for f in PAPER_FRACTIONS) + ")"
-    return f"none ({level}, trend {stats.Estimate.from_json(trend).text('+.1f')})" if trend else (
-        "none (too few evaluations)")
+    """'95.1 (85.6, 90.3)': the asymptote and its 90 % and 95 % thresholds where the paper's measure has one, else
+    'none (43.8)'."""
+    level = _number(variant.get("asymptote"))
+    if variant.get("paper_asymptote"):
+        return level + " (" + ", ".join(_number(stats.fraction_of(variant["asymptote"], f))
+                                        for f in PAPER_FRACTIONS) + ")"
+    return f"none ({level})"
 
 
 PAPER_WORDS = f"< 1/2 of the updates (> {PAPER_SPEEDUP:g}x)"
-CLAIMS_HEAD = ["| study | variant vs reference | seeds | asymptote (90 %, 95 % of it) | speed-up to 90 % | "
-               "speed-up to 95 % | paper | holds at 90 % / 95 %? | final | best | last | improvement over BC | "
-               "BC level (seed mean) |",
-               "|---|---|--:|---|--:|--:|---|---|--:|--:|--:|--:|--:|"]
-CLAIMS_NOTE = ("The paper's measure, per comparison, from every seed's updates (pre-training included; each study's "
-               "table above lists them) to 90 % and 95 % of the asymptote: the reference (from-scratch) arm's "
-               "plateau, the mean over its seeds of each seed's last 10 % of evaluations, an asymptote only where its "
-               "curve is flat (the bootstrap interval of the change of its last 20 % of evaluations against the 20 % "
-               "before within +-5 % of the level; else 'none', with that change). Speed-up = the reference's mean "
-               "updates / the variant's [95 % CI], ≥ / ≤ / 'both censored' where seeds never reached the threshold "
-               "(counted at the budget); the paper's \"less than 1/2 of the training steps\" is a speed-up above "
-               f"{PAPER_SPEEDUP:g}x: yes / no only where the interval lies wholly above / at or below it. Variant / "
-               "reference, as the study tables print them: final, last and improvement over BC (final minus the "
-               "comparison's BC level, seed by seed, with its 95 % CI) as IQMs over seeds; best: the seed-mean "
-               "curve's peak.")
+CLAIMS_HEAD = ["| study | variant vs reference | seeds | asymptote (90 %, 95 % of it) | plateau test | "
+               "speed-up to 90 % | speed-up to 95 % | paper | holds at 90 % / 95 %? | final | best | last | "
+               "improvement over BC | BC level (seed mean) |",
+               "|---|---|--:|---|---|--:|--:|---|---|--:|--:|--:|--:|--:|"]
+CLAIMS_NOTE = ("The paper's measure, per comparison. Asymptote: the reference (from-scratch) arm's plateau, the mean "
+               "over its seeds of each seed's last 10 % of evaluations, an asymptote only where its curve is flat. "
+               "Plateau test: the change of its last 20 % of evaluations against the 20 % before (per seed, mean "
+               "over seeds [95 % CI]), flat where the interval lies within the margin (±5 % of the level, at least "
+               f"1 point), on at least {MIN_PER_SIDE} evaluations a side (else 'too few evaluations'). Speed-up: "
+               "the reference's mean updates / the variant's [95 % CI] to each seed's sustained reach, the first "
+               "update (pre-training included) at which the mean of its last evaluations (as many as the level "
+               f"averages, at least {MIN_WINDOW}) is at or above the threshold; ≥ / ≤ / 'both censored' where seeds "
+               "never got there (counted at the budget). The paper's \"less than 1/2 of the training steps\" is a "
+               f"speed-up above {PAPER_SPEEDUP:g}x: yes / no only where the interval lies wholly above / at or below "
+               "it. Variant / reference, as the study tables print them: final, last and improvement over BC (final "
+               "minus the comparison's BC level, seed by seed, with its 95 % CI) as IQMs over seeds; best: the "
+               "seed-mean curve's peak.")
 
 
 def claims_rows(name: str, summary: list[dict]) -> list[str]:
@@ -190,13 +269,14 @@ def claims_rows(name: str, summary: list[dict]) -> list[str]:
         if not vs:
             continue
         ref = by_label[vs["reference"]]
-        found = {x["threshold"]: x for x in vs["speedup"]}
-        verdicts = (vs.get("paper") or {}).get("verdicts", {})
+        paper = vs.get("paper") or {}
+        found = {x["threshold"]: x for x in paper.get("speedup", [])}
+        verdicts = paper.get("verdicts", {}) if found else {}
         names = [threshold_name(f) for f in PAPER_FRACTIONS]
         ratios = [bc_level.speedup_text(found[n]) if n in found and n in verdicts else "n/a" for n in names]
         said = " / ".join(SHORT.get(verdicts[n], verdicts[n]) for n in names if n in verdicts) or "n/a"
         rows.append(f"| {name} | {s['variant']} vs {ref['variant']} | {len(s['seeds'])} | {_plateau_cell(s)} | "
-                    + " | ".join(ratios) + f" | {PAPER_WORDS} | {said} | {_arms(s, ref)} | "
+                    f"{plateau_test(s)} | " + " | ".join(ratios) + f" | {PAPER_WORDS} | {said} | {_arms(s, ref)} | "
                     f"{bc_level.claim_cells(s)[0]} |")
     return rows
 

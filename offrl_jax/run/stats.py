@@ -13,6 +13,8 @@ edge of the statistical precipice"; the definitions are rliable's).
   seeds at the budget, with its interval; a censored reference seed makes it a lower bound.
 - `probability_of_improvement`: P(X > Y) + P(X = Y) / 2 for one draw of each arm (Mann-Whitney U / (n m)).
 - `trend_is_flat`: whether a curve's last evaluations are level: the interval of their change within +-5 %.
+- `running_mean`, `sustained_reach`: a trailing mean over a window of evaluations, and the first update at which it
+  is at or above a threshold (censored like `first_reach`).
 - `performance_profile`: the fraction of runs scoring above each tau.
 
 Scores are (S seeds, E evaluations) arrays; NaN marks a seed that diverged and stopped.
@@ -168,28 +170,59 @@ def pooled(statistic: Callable[..., np.ndarray]) -> Callable[..., np.ndarray]:
     return of
 
 
+def trend_window(evaluations: int, fraction: float = 0.2) -> int:
+    """The evaluations in each of `trend_is_flat`'s two windows: `fraction` of `evaluations`, at least 1."""
+    return max(1, int(round(fraction * evaluations)))
+
+
+def flat_margin(scores: np.ndarray, k: int, margin: float = 0.05) -> float:
+    """`trend_is_flat`'s margin for `scores` (S, E): `margin` of the level of their last `k` evaluations (the mean
+    over seeds, its absolute value), at least 1 point."""
+    with _quiet():
+        level = abs(float(np.nanmean(np.asarray(scores, dtype=float)[:, -k:])))
+    return max(margin * level, 1.0)
+
+
 def trend_is_flat(scores: np.ndarray, fraction: float = 0.2, margin: float = 0.05,
                   seed: int = SEED) -> tuple[Estimate | None, bool]:
     """(trend, flat): per seed, the mean of the last `fraction` of evaluations minus the mean of the `fraction`
     before; its mean over seeds with a bootstrap interval.  Flat is an equivalence test, not a failure to see a
-    change: the whole interval lies within +-`margin` of the last window's level (5 %, at least 1 point), so a
-    noisy curve whose wide interval holds 0 is not flat.  One seed: its change within the margin.  Too few
-    evaluations for two windows: (None, False)."""
+    change: the whole interval lies within +-`margin` of the last window's level (5 %, at least 1 point:
+    `flat_margin`), so a noisy curve whose wide interval holds 0 is not flat.  One seed: its change within the
+    margin.  Too few evaluations for two windows (`trend_window`): (None, False)."""
     scores = np.asarray(scores, dtype=float)
     assert scores.ndim == 2, scores.shape
-    k = max(1, int(round(fraction * scores.shape[1])))
+    k = trend_window(scores.shape[1], fraction)
     if scores.shape[1] < 2 * k:
         return None, False
     with _quiet():
         change = np.nanmean(scores[:, -k:], axis=1) - np.nanmean(scores[:, -2 * k:-k], axis=1)
-        level = abs(float(np.nanmean(scores[:, -k:])))
     trend = interval([change], mean, seed=seed)
     if not math.isfinite(trend.value):
         return trend, False
-    tolerance = max(margin * level, 1.0)
+    tolerance = flat_margin(scores, k, margin)
     if trend.low is None:
         return trend, bool(abs(trend.value) <= tolerance)
     return trend, bool(-tolerance <= trend.low and trend.high <= tolerance)
+
+
+def running_mean(scores: np.ndarray, window: int) -> np.ndarray:
+    """(S, E): per seed the trailing mean of `scores` (S, E) over `window` evaluations, the one at evaluation j
+    averaging evaluations j - window + 1 .. j; NaN at the first window - 1 evaluations (too few before them) and
+    wherever the window holds a NaN (a seed that diverged)."""
+    scores = np.asarray(scores, dtype=float)
+    assert scores.ndim == 2 and window >= 1, (scores.shape, window)
+    out = np.full(scores.shape, np.nan)
+    if scores.shape[1] >= window:
+        out[:, window - 1:] = np.lib.stride_tricks.sliding_window_view(scores, window, axis=1).mean(axis=-1)
+    return out
+
+
+def sustained_reach(updates: np.ndarray, scores: np.ndarray, threshold: float,
+                    window: int) -> tuple[np.ndarray, np.ndarray]:
+    """`first_reach` of the `running_mean` over `window` evaluations: per seed the first update at which the mean
+    of its last `window` evaluations is at or above `threshold`; censored at the last update where it never is."""
+    return first_reach(updates, running_mean(scores, window), threshold)
 
 
 def performance_profile(scores: np.ndarray, taus: np.ndarray) -> np.ndarray:

@@ -13,8 +13,9 @@ Every measure is per seed first (`offrl_jax.run.stats`), then aggregated with a 
 - against the from-scratch reference: the speed-up (reference's mean updates / this variant's) with its interval,
   the probability of improvement of the final score, and whether the paper's claim (fewer updates) holds at the
   headline threshold: 90 % of the asymptote where there is one, else 90 % of the best score;
-- the paper's own measure (`offrl_jax.run.claim`): at 90 % and 95 % of the asymptote, whether the speed-up's
-  interval lies above 2x (under 1/2 of the updates, as the paper says), with how the plateau was found.
+- the paper's own measure (`offrl_jax.run.claim`): each seed's sustained reach of 90 % and 95 % of the asymptote
+  (its running mean there), and whether the speed-up's interval lies above 2x (under 1/2 of the updates, as the
+  paper says), with how the plateau was found.
 """
 from __future__ import annotations
 
@@ -45,13 +46,18 @@ from offrl_jax.system.checkpoint import atomic_write_text
 FRACTIONS = (0.8, 0.9, 0.95)
 
 
-def final_scores(study: Study, updates: np.ndarray, scores: np.ndarray) -> np.ndarray:
-    """Per seed, the mean of its evaluations in `final_window`, or of the last 10 % of them; NaN for a seed that
-    diverged before or inside the window (not the mean of its evaluations before it diverged)."""
+def final_mask(study: Study, updates: np.ndarray) -> np.ndarray:
+    """(E,) bool: the evaluations of `updates` (E,) the final score averages: those in `final_window`, or the last
+    10 % of them (at least 1)."""
     if study.final_window:
-        keep = (updates >= study.final_window[0]) & (updates <= study.final_window[1])
-    else:
-        keep = np.arange(len(updates)) >= len(updates) - max(1, int(round(0.1 * len(updates))))
+        return (updates >= study.final_window[0]) & (updates <= study.final_window[1])
+    return np.arange(len(updates)) >= len(updates) - max(1, int(round(0.1 * len(updates))))
+
+
+def final_scores(study: Study, updates: np.ndarray, scores: np.ndarray) -> np.ndarray:
+    """Per seed, the mean of its evaluations in `final_mask`; NaN for a seed that diverged before or inside the
+    window (not the mean of its evaluations before it diverged)."""
+    keep = final_mask(study, updates)
     return scores[:, keep].mean(axis=1) if keep.any() else np.full(len(scores), np.nan)
 
 
@@ -97,6 +103,8 @@ def _summarize(study: Study, rows: list[dict], pretrain_ends: dict[str, int], be
         ref_curve = curves[reference][2] if reference and len(curves[reference][0]) else None
         found = claim.plateau(finals.get(reference), ref_curve)  # the reference's final, an asymptote where flat
         asymptote, trend, flat = found.level, found.trend, found.flat
+        # the paper's measure: sustained reach over as many evaluations as the reference's level averages
+        window = claim.window(int(final_mask(study, curves[reference][0]).sum())) if ref_curve is not None else 0
         thresholds = ([("behaviour data", behaviour)] if behaviour is not None else []) + [
             (f"{f:.0%} of best", stats.fraction_of(best, f)) for f in FRACTIONS if best is not None] + [
             (claim.threshold_name(f), stats.fraction_of(asymptote, f)) for f in FRACTIONS if flat] + (
@@ -132,6 +140,10 @@ def _summarize(study: Study, rows: list[dict], pretrain_ends: dict[str, int], be
             # its mean change over the last 20 % of evaluations (against the 20 % before), and whether its interval
             # lies within +-5 % of its level: only a flat one is an asymptote the thresholds may be fractions of
             "asymptote_trend": trend.to_json() if trend is not None else None, "asymptote_flat": flat,
+            # the test's evaluations a side and margin; the paper's measure reads an asymptote only where it is flat
+            # on at least claim.MIN_PER_SIDE a side, and each seed's sustained reach of 90 % and 95 % of it
+            "asymptote_per_side": found.per_side, "asymptote_margin": found.margin, "paper_asymptote": found.paper,
+            "sustained_reach": claim.sustained_reach(updates, scores, found, window, own.get(v.label), v.label),
             "best_score": best, "reach": reach,
             # the BC level this variant's improvement is measured from, the one its comparison's thresholds are
             # measured from (the same for most), and per seed the final score minus the first
@@ -175,8 +187,9 @@ def compare(mine: dict, ref: dict) -> dict:
         "90% of best" if "90% of best" in names else None)
     return {"reference": ref["variant"], "speedup": speedups, "headline": headline,
             "verdict": claim.verdict(speedups[names.index(headline)] if headline else None, len(mine["seeds"])),
-            # the paper's measure: at 90 % and 95 % of a flat asymptote, under 1/2 of the updates (a speed-up > 2x)?
-            "paper": claim.paper_measure(speedups, len(mine["seeds"])),
+            # the paper's measure: sustained reach of 90 % and 95 % of the asymptote in under 1/2 of the updates?
+            "paper": claim.paper_measure(mine.get("sustained_reach") or [], ref.get("sustained_reach") or [],
+                                         len(mine["seeds"])),
             "poi_final": stats.probability_of_improvement(np.array(mine["final_scores"], float),
                                                           np.array(ref["final_scores"], float)).to_json(),
             "poi_auc": stats.probability_of_improvement(np.array(mine["auc_scores"], float),
@@ -263,7 +276,7 @@ def summary_table(summary: list[dict]) -> str:
                       f"{s['variant']} needs fewer updates than {ref['variant']} to reach "
                       f"{vs['headline'] or 'a threshold'}: "
                       f"{claim.VERDICT_WORDS.get(vs['verdict'], vs['verdict'])}."]
-        lines += claim.lines(s)
+        lines += claim.lines(s, ref)
     lines += online_table([s["online"] for s in summary if s.get("online")])
     return "\n".join(lines)
 
