@@ -75,3 +75,30 @@ def soft_returns_to_go(
     ends, tail = _episode_flags(terminal, jnp.asarray(timeouts), timeout_tail)
     values = jnp.where(tail, soft_rewards / (1.0 - gamma), soft_rewards)
     return _discounted_sum(values, ends, gamma)
+
+
+@jax.jit(static_argnames=("timeout_tail",))
+def soft_returns_to_go_from_states(
+    rewards: jax.Array,
+    entropies: jax.Array,
+    terminals: jax.Array,
+    timeouts: jax.Array,
+    gamma: float,
+    alpha: jax.Array | float,
+    timeout_tail: bool = True,
+) -> jax.Array:
+    """The authors' soft return-to-go: R_t + alpha sum_{k=t+1}^{T} gamma^(k-t) H'_k.  (T,) each -> (T,).
+
+    `entropies[t]` is the entropy estimate at the row's own observation s_t; T is the episode's last row, and H'_T
+    is H_T / (1 - gamma) where the reward gets its tail (a time-out or the dataset end).  So the last row of an
+    episode has no entropy term, and the row before it carries gamma H(s_T) / (1 - gamma) (`soft_returns_to_go`
+    gives the last row gamma alpha H(s_{T+1}) instead).  Written as the plain return of
+    r'_t = r_t + gamma alpha H'_{t+1} (0 on the episode's last row).
+    """
+    rewards = jnp.asarray(rewards, jnp.float32)
+    entropies = jnp.asarray(entropies, jnp.float32)
+    ends, tail = _episode_flags(jnp.asarray(terminals), jnp.asarray(timeouts), timeout_tail)
+    tailed = lambda x: jnp.where(tail, x / (1.0 - gamma), x)  # noqa: E731
+    next_entropies = jnp.append(tailed(entropies)[1:], 0.0)  # H'_{t+1}, within the episode (ends: unused)
+    values = tailed(rewards) + jnp.where(ends, 0.0, gamma * alpha * next_entropies)
+    return _discounted_sum(values, ends, gamma)
