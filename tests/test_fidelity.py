@@ -49,6 +49,24 @@ def test_torch_init_is_uniform_within_one_over_sqrt_fan_in_and_hidden_bias_const
     np.testing.assert_allclose(out.T @ out, 2.0 * np.eye(2), atol=1e-5)
 
 
+def test_authors_edac_critics_read_the_torch_bound_from_the_output_width():
+    # CORL's VectorizedLinear: kaiming_uniform on an (in, out) weight takes fan_in = out, U(+-1/sqrt(256)) in the
+    # first critic layer of 14 inputs (nn.Linear: U(+-1/sqrt(14))); the actor (nn.Linear) keeps its fan_in
+    def first_layers(**kw):
+        cfg = make_config("edac", "hopper", num_critics=3, hidden=(256, 256), **kw)
+        state = make_algorithm(cfg, 11, 3, 8).init(jax.random.PRNGKey(0))
+        critic = state.critic.params["params"]["VmapCritic_0"]["MLP_0"]["Dense_0"]["kernel"]
+        actor = state.actor.params["params"]["MLP_0"]["Dense_0"]["kernel"]
+        return float(jnp.abs(critic).max()), float(jnp.abs(actor).max())
+
+    critic, actor = first_layers(preset="authors")
+    assert 0.95 / 16 < critic <= 1 / 16 and 0.95 / math.sqrt(11) < actor <= 1 / math.sqrt(11)
+    critic, _ = first_layers(preset="authors", critic_fan="in")
+    assert 0.95 / math.sqrt(14) < critic <= 1 / math.sqrt(14)
+    with pytest.raises(ValueError, match="critic_fan = 'both' must be in or out"):
+        make_config("edac", "hopper", critic_fan="both")
+
+
 def test_done_flags_per_timeout_mode():
     batch = {"terminals": jnp.array([0.0, 1.0, 0.0]), "timeouts": jnp.array([0.0, 0.0, 1.0])}
     np.testing.assert_array_equal(done_flags(batch, "bootstrap"), [0, 1, 0])
@@ -266,7 +284,8 @@ def test_authors_preset_values_and_precedence():
         10.0, (256, 256, 256), (256, 256), False, 1e-5, "torch", "stop", 0.0, "signed", False)
     edac = make_config("edac_bc", "walker2d", preset="authors")
     assert (edac.hidden_bias, edac.tanh_log_det, edac.log_alpha_bound, edac.timeouts, edac.balance,
-            edac.pretrain_extra, edac.soft_entropy_at) == (0.1, "eps", 10.0, "stop", "signed", 1000, "observations")
+            edac.pretrain_extra, edac.soft_entropy_at, edac.critic_fan) == (
+        0.1, "eps", 10.0, "stop", "signed", 1000, "observations", "out")
     assert make_config("td3bc", "door", preset="authors").alpha == 0.1  # the paper's Table 3, not their config's 1.0
     assert make_config("td3bc", "hopper", preset="authors", timeouts="drop").timeouts == "drop"  # flags win
     assert make_config("cql", "door", preset="authors").alpha_lr == 3e-5

@@ -58,6 +58,7 @@ class SACNConfig(Config):
     eta: float = 1.0  # EDAC's ensemble-diversity weight (0 = SAC-N)
     alpha_lr: float = 3e-4  # Adam learning rate of the entropy temperature
     hidden_bias: float | None = None  # constant hidden-layer bias; CORL's EDAC: 0.1
+    critic_fan: str = "in"  # the critics' "torch" init bound 1/sqrt(fan): in, or out (CORL's VectorizedLinear)
     out_init: bool = True  # final layers U(+-1e-3) actor, U(+-3e-3) critics (EDAC); False: the init scheme's own
     log_std_bounds: tuple[float, float] = (-5.0, 2.0)  # EDAC; CORL's CQL: (-20, 2)
     log_std_offset: float = 0.0  # added to the raw log-std before clipping; CORL's CQL: -1
@@ -99,6 +100,7 @@ class SACNConfig(Config):
             ("log_std_bounds", self.log_std_bounds[0] < self.log_std_bounds[1], "must be (low, high) with low < high"),
             ("tanh_log_det", self.tanh_log_det in TANH_LOG_DETS, f"must be one of {', '.join(TANH_LOG_DETS)}"),
             ("log_alpha_bound", self.log_alpha_bound >= 0, "must be >= 0"),
+            ("critic_fan", self.critic_fan in ("in", "out"), "must be in or out"),
             ("soft_entropy_at", self.soft_entropy_at in SOFT_ENTROPY_AT, f"must be {' or '.join(SOFT_ENTROPY_AT)}"),
             ("bc_weight", self.bc_weight >= 0, "must be >= 0 (0 = off)"),
             ("cql_alpha", self.cql_alpha >= 0, "must be >= 0 (0 = off)"),
@@ -137,7 +139,8 @@ class SACN:
                                        tuple(config.log_std_bounds), config.log_std_offset,
                                        1e-3 if config.out_init else None)
         critic_kw = dict(num=config.num_critics, hidden=config.hidden, layer_norm=config.critic_layer_norm,
-                         out_scale=3e-3 if config.out_init else None, arch=arch)
+                         out_scale=3e-3 if config.out_init else None,
+                         arch=dataclasses.replace(arch, fan=config.critic_fan))
         self.critic = CriticEnsemble(**critic_kw)
         self.critic_per_member = CriticEnsemble(**critic_kw, per_member_actions=True)  # same parameters
         self.actor_tx, self.critic_tx = optax.adam(config.actor_lr), optax.adam(config.critic_lr)
