@@ -64,10 +64,10 @@ def soft_returns_to_go(
     A terminal's successor is absorbing (no entropy bonus); a time-out's tail r'_T / (1 - gamma) repeats the entropy
     bonus as well as the reward.
 
-    Versus the authors' `compute_soft_returns_to_go` (entropies at s_t, `discount_cumsum(include_first=False)`):
-    inside an episode the two are identical.  At its last row T they give the soft part 0 and row T-1 the bonus
-    gamma H(s_T) / (1 - gamma); here row T gets gamma alpha H(s_{T+1}) (/ (1 - gamma) at a time-out), the entropy of
-    the state the episode actually continues from, so the last row is not the only one without an entropy term.
+    Versus the authors' form (`soft_returns_to_go_from_states`): inside an episode the two are identical.  At its
+    last row T they give the soft part 0 and row T-1 the bonus gamma H(s_T) / (1 - gamma); here row T gets gamma
+    alpha H(s_{T+1}) (/ (1 - gamma) at a time-out), the entropy of the state the episode actually continues from,
+    so the last row is not the only one without an entropy term.
     """
     rewards = jnp.asarray(rewards, jnp.float32)
     terminal = jnp.asarray(terminals) > 0
