@@ -27,6 +27,7 @@ LOG_STD_MIN, LOG_STD_MAX = -5.0, 2.0
 # (the authors' cql.py, and CORL's before it changed the output layer's).
 INITS = ("flax", "torch", "orthogonal", "orthogonal_all")
 TANH_LOG_DETS = ("exact", "eps")
+FANS = ("in", "out")  # Arch.fan
 
 
 @dataclasses.dataclass(frozen=True)

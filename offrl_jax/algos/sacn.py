@@ -39,6 +39,7 @@ from offrl_jax.algos.common import (
 from offrl_jax.algos.config import Config, arch_with_bias, check_cql_fields, require
 from offrl_jax.data.returns import soft_returns_to_go, soft_returns_to_go_from_states
 from offrl_jax.nets import (
+    FANS,
     TANH_LOG_DETS,
     Arch,
     CriticEnsemble,
@@ -100,7 +101,7 @@ class SACNConfig(Config):
             ("log_std_bounds", self.log_std_bounds[0] < self.log_std_bounds[1], "must be (low, high) with low < high"),
             ("tanh_log_det", self.tanh_log_det in TANH_LOG_DETS, f"must be one of {', '.join(TANH_LOG_DETS)}"),
             ("log_alpha_bound", self.log_alpha_bound >= 0, "must be >= 0"),
-            ("critic_fan", self.critic_fan in ("in", "out"), "must be in or out"),
+            ("critic_fan", self.critic_fan in FANS, f"must be {' or '.join(FANS)}"),
             ("soft_entropy_at", self.soft_entropy_at in SOFT_ENTROPY_AT, f"must be {' or '.join(SOFT_ENTROPY_AT)}"),
             ("bc_weight", self.bc_weight >= 0, "must be >= 0 (0 = off)"),
             ("cql_alpha", self.cql_alpha >= 0, "must be >= 0 (0 = off)"),
