@@ -198,6 +198,28 @@ def test_authors_pretraining_schedule_10k_soft_bc_then_11k_critic():
         make_config("edac", "hopper", pretrain_extra=-1)
 
 
+def test_edac_hand_over_keeps_every_adam_state_and_freezes_actor_and_alpha_in_critic_pretraining():
+    # the authors build each optimiser once: soft BC, critic pre-training and EDAC step the same Adam states
+    cfg = make_config("edac", "hopper", preset="authors", num_critics=2, hidden=(8,), pretrain_updates=4,
+                      pretrain_extra=1)
+    algo = make_algorithm(cfg, 3, 2, 8)
+    phases = {p.name: p for p in algo.phases(10)}
+    assert [(p.name, p.steps) for p in phases.values()] == [("actor_pretrain", 2), ("critic_pretrain", 3),
+                                                            ("offline_rl", 5)]
+    count = lambda model: int(model.opt_state[0].count)  # noqa: E731  optax.adam's step counter
+    state, batch = algo.init(jax.random.PRNGKey(0)), {k: v[None] for k, v in tiny_batch().items()}
+    for name, steps in (("actor_pretrain", 2), ("critic_pretrain", 3)):
+        before = state
+        for i in range(steps):
+            state, _ = phases[name].update(state, batch, jax.random.PRNGKey(i))
+    assert (count(state.actor), count(state.log_alpha), count(state.critic)) == (2, 2, 3)
+    # the critic phase moved neither the actor nor the temperature
+    assert all(np.array_equal(a, b) for a, b in zip(jax.tree.leaves((before.actor, before.log_alpha)),
+                                                      jax.tree.leaves((state.actor, state.log_alpha))))
+    state, _ = phases["offline_rl"].update(state, batch, jax.random.PRNGKey(9))
+    assert (count(state.actor), count(state.log_alpha), count(state.critic)) == (3, 3, 4)
+
+
 def test_soft_returns_entropies_at_the_observations_or_the_next_observations():
     n = 6
     rng = np.random.default_rng(0)
