@@ -9,6 +9,10 @@ EDAC's 10-critic updates are what bound its budget: measured with 2 seeds on one
 takes ~10 s per 1k updates, critic pre-training ~190-290 s and EDAC ~480 s, so the from-scratch arm alone takes
 ~2 h and the pre-trained arm ~1.2 h (3 seeds: about 1.5x).  Each (env, algo) pair goes to its own sub-directory.
 
+With `--preset authors` EDAC follows the authors' schedule instead (docs/fidelity.md): the per-env ensembles (hopper
+50 critics), 10k soft BC + 11k critic updates, and their budgets (hopper 3M, halfcheetah 1M, walker2d 12M updates)
+unless --edac-updates, --num-critics or --pretrain-updates say otherwise.
+
     python -m experiments.figure2 [--envs hopper] [--algos td3bc] [--edac-updates 50000] [--seeds 2]
 """
 from dataclasses import replace
@@ -22,6 +26,9 @@ from offrl_jax.system.cli import positive_int
 # 3e-3 output init) and needs ~5k Adam steps just to reach the returns' scale (~300 on hopper); with 3k (the default
 # before 2345a4a) the run handed over an unfitted critic and collapsed (RESULTS.md, Figure 2 EDAC).
 EDAC_PRETRAIN = {"pretrain_updates": 12_000, "actor_pretrain_fraction": 0.25}
+EDAC_UPDATES = 16_000  # the CPU-sized budget
+# the authors' EDAC budgets, pre-training included (configs/edac/<env>/medium_v2.yaml: num_epochs x 1k updates)
+AUTHORS_EDAC_UPDATES = {"hopper": 3_000_000, "halfcheetah": 1_000_000, "walker2d": 12_000_000}
 
 
 def edac_overrides(overrides: dict, num_critics: int) -> dict:
@@ -30,18 +37,20 @@ def edac_overrides(overrides: dict, num_critics: int) -> dict:
 
 
 def build(args):
-    studies = []
+    studies, authors = [], "authors" in (args.preset or [])
     for env in args.envs:
         for algo in args.algos:
             variants, extra = pretrain_variants(algo, args.pretrain, args), {}
             if algo in ("td3bc", "rebrac", "iql"):  # --num-critics is EDAC's ensemble; these keep their two critics
                 variants = tuple(replace(v, overrides=tuple((k, x) for k, x in v.overrides if k != "num_critics"))
                                  for v in variants)
-            if algo == "edac":  # 10 critics on a CPU unless --num-critics says otherwise
+            if algo == "edac" and authors:  # the authors' schedule: the preset's and per-env values, their budget
+                extra = {"updates": args.edac_updates or AUTHORS_EDAC_UPDATES[env], "eval_every": args.edac_eval_every}
+            elif algo == "edac":  # 10 critics on a CPU unless --num-critics says otherwise
                 n = args.num_critics or 10
                 variants = tuple(replace(v, overrides=tuple(sorted(edac_overrides(dict(v.overrides), n).items())))
                                  for v in variants)
-                extra = {"updates": args.edac_updates, "eval_every": args.edac_eval_every}
+                extra = {"updates": args.edac_updates or EDAC_UPDATES, "eval_every": args.edac_eval_every}
             if algo == "rebrac" and args.batch_size == BATCH_SIZE:  # the flag's default: ReBRAC's own batch
                 extra = {"batch_size": 1024}
             studies.append(make_study(env, algo, args.level, args, extra=extra, variants=variants,
@@ -60,7 +69,10 @@ def make_parser():
                            f"{BATCH_SIZE}, which ReBRAC replaces with its own 1024)")
     p.add_argument("--algos", nargs="+", choices=("td3bc", "edac", "rebrac", "iql"), default=["td3bc", "edac"],
                    help="(default: td3bc edac, the paper's)")
-    p.add_argument("--edac-updates", type=positive_int, default=16_000, help="EDAC's budget (default %(default)s)")
+    p.add_argument("--edac-updates", type=positive_int, default=None,
+                   help=f"EDAC's budget (default {EDAC_UPDATES}; with --preset authors the authors' per env, "
+                        "pre-training included: " + ", ".join(f"{e} {n:,}" for e, n in AUTHORS_EDAC_UPDATES.items())
+                        + ")")
     p.add_argument("--edac-eval-every", type=positive_int, default=1_000,
                    help="EDAC's evaluation interval (default %(default)s); --updates and --eval-every are TD3+BC's")
     return p

@@ -27,6 +27,7 @@ LOG_STD_MIN, LOG_STD_MAX = -5.0, 2.0
 # (the authors' cql.py, and CORL's before it changed the output layer's).
 INITS = ("flax", "torch", "orthogonal", "orthogonal_all")
 TANH_LOG_DETS = ("exact", "eps")
+FANS = ("in", "out")  # Arch.fan
 
 
 @dataclasses.dataclass(frozen=True)
@@ -37,6 +38,9 @@ class Arch:
     layer_norm_eps: float = 1e-6  # flax's default; torch's (the authors') is 1e-5
     init: str = "flax"  # one of INITS
     hidden_bias: float | None = None  # constant hidden-layer bias (CORL's EDAC: 0.1); None: the scheme's own
+    # the width "torch"'s bound reads: a layer's input (nn.Linear) or its output (CORL's VectorizedLinear hands
+    # kaiming_uniform an (in, out) weight, so its EDAC critics get U(+-1/sqrt(out)))
+    fan: str = "in"
 
     def kernel_init(self, fan_in: int, last: bool):
         if self.init == "torch":
@@ -73,13 +77,13 @@ class MLP(nn.Module):
     def __call__(self, x: jax.Array) -> jax.Array:
         a = self.arch
         for width in self.hidden:
-            fan_in = x.shape[-1]
+            fan_in = x.shape[-1] if a.fan == "in" else width
             x = nn.Dense(width, kernel_init=a.kernel_init(fan_in, False), bias_init=a.bias_init(fan_in, False))(x)
             if self.layer_norm:
                 x = nn.LayerNorm(epsilon=a.layer_norm_eps, use_scale=a.layer_norm_affine,
                                  use_bias=a.layer_norm_affine)(x)
             x = nn.relu(x)
-        fan_in = x.shape[-1]
+        fan_in = x.shape[-1] if a.fan == "in" else self.out_dim
         if self.out_scale is None:
             init = dict(kernel_init=a.kernel_init(fan_in, True), bias_init=a.bias_init(fan_in, True))
             return nn.Dense(self.out_dim, **init)(x)

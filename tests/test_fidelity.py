@@ -49,6 +49,24 @@ def test_torch_init_is_uniform_within_one_over_sqrt_fan_in_and_hidden_bias_const
     np.testing.assert_allclose(out.T @ out, 2.0 * np.eye(2), atol=1e-5)
 
 
+def test_authors_edac_critics_read_the_torch_bound_from_the_output_width():
+    # CORL's VectorizedLinear: kaiming_uniform on an (in, out) weight takes fan_in = out, U(+-1/sqrt(256)) in the
+    # first critic layer of 14 inputs (nn.Linear: U(+-1/sqrt(14))); the actor (nn.Linear) keeps its fan_in
+    def first_layers(**kw):
+        cfg = make_config("edac", "hopper", num_critics=3, hidden=(256, 256), **kw)
+        state = make_algorithm(cfg, 11, 3, 8).init(jax.random.PRNGKey(0))
+        critic = state.critic.params["params"]["VmapCritic_0"]["MLP_0"]["Dense_0"]["kernel"]
+        actor = state.actor.params["params"]["MLP_0"]["Dense_0"]["kernel"]
+        return float(jnp.abs(critic).max()), float(jnp.abs(actor).max())
+
+    critic, actor = first_layers(preset="authors")
+    assert 0.95 / 16 < critic <= 1 / 16 and 0.95 / math.sqrt(11) < actor <= 1 / math.sqrt(11)
+    critic, _ = first_layers(preset="authors", critic_fan="in")
+    assert 0.95 / math.sqrt(14) < critic <= 1 / math.sqrt(14)
+    with pytest.raises(ValueError, match="critic_fan = 'both' must be in or out"):
+        make_config("edac", "hopper", critic_fan="both")
+
+
 def test_done_flags_per_timeout_mode():
     batch = {"terminals": jnp.array([0.0, 1.0, 0.0]), "timeouts": jnp.array([0.0, 0.0, 1.0])}
     np.testing.assert_array_equal(done_flags(batch, "bootstrap"), [0, 1, 0])
@@ -129,16 +147,117 @@ def tiny_batch(obs_dim=3, act_dim=2, b=8, k=None, seed=0):
     return batch | {"idx": jnp.zeros(shape, jnp.int32)}
 
 
-def test_log_alpha_bound_clips_in_offline_rl_only():
-    cfg = make_config("edac", "hopper", num_critics=2, hidden=(8,), log_alpha_bound=0.1, alpha_lr=1.0, init_alpha=1.0)
+def test_log_alpha_bound_clips_the_temperature_used_in_offline_rl_not_the_parameter():
+    # the authors' update: alpha = exp(clip(log_alpha, -10, 10)); log_alpha itself keeps its Adam steps
+    cfg = make_config("edac", "hopper", num_critics=2, hidden=(8,), log_alpha_bound=10.0)
     algo = make_algorithm(cfg, 3, 2, 8)
     state = algo.init(jax.random.PRNGKey(0))
-    batch = tiny_batch()
-    for _ in range(3):  # lr 1: log alpha moves by ~1 per step without the clip
-        state_free, _ = algo.temperature_update(state, batch, jax.random.PRNGKey(1))
-        state, _ = algo.rl_update(state, batch, jax.random.PRNGKey(1))
-    assert abs(float(state.log_alpha.params)) <= 0.1 + 1e-7
-    assert abs(float(state_free.log_alpha.params)) > 0.1  # pre-training's temperature steps are not clipped
+    state = state.replace(log_alpha=state.log_alpha.replace(params=jnp.float32(-12.0)))
+    batch, key = tiny_batch(), jax.random.PRNGKey(1)
+    new, metrics = algo.temperature_update(state, batch, key, clip=True)
+    assert abs(float(new.log_alpha.params) + 12.0) < 1e-3  # Adam's first step: lr 3e-4; not clipped to -10
+    np.testing.assert_allclose(metrics["alpha"], math.exp(-10.0), rtol=1e-6)
+    np.testing.assert_allclose(algo.alpha(state, clip=True), math.exp(-10.0), rtol=1e-6)
+    np.testing.assert_allclose(algo.alpha(state, clip=False), math.exp(-12.0), rtol=1e-6)
+    # the actor's loss in offline RL uses the clipped temperature
+    action, log_prob = algo.sample_policy(state.actor.params, batch["observations"], key)
+    q = algo.critic.apply(state.critic.params, batch["observations"], action)
+    loss, _ = algo.actor_loss(state.actor.params, state, batch, key)
+    np.testing.assert_allclose(loss, L.sac_actor_loss(q, log_prob, jnp.float32(math.exp(-10.0))), rtol=1e-6)
+    # soft BC (pre-training) uses the unclipped one, and so does a TD target during critic pre-training
+    assert not np.isclose(float(L.sac_actor_loss(q, log_prob, jnp.float32(math.exp(-12.0)))), float(loss))
+    np.testing.assert_allclose(algo.td_target(state, batch, key, clip=False) - algo.td_target(state, batch, key),
+                               0.99 * (math.exp(-10.0) - math.exp(-12.0)) * algo.sample_policy(
+                                   state.actor.params, batch["next_observations"], key)[1], rtol=0, atol=1e-6)
+    # soft BC's temperature steps are not clipped either
+    free = make_config("edac", "hopper", num_critics=2, hidden=(8,), log_alpha_bound=0.1, alpha_lr=1.0)
+    algo = make_algorithm(free, 3, 2, 8)
+    state = algo.init(jax.random.PRNGKey(0))
+    for _ in range(3):  # lr 1: log alpha moves by ~1 per step
+        state, metrics = algo.temperature_update(state, batch, jax.random.PRNGKey(1))
+    assert abs(float(state.log_alpha.params)) > 0.1 and abs(math.log(float(metrics["alpha"]))) > 0.1
+
+
+def test_authors_pretraining_schedule_10k_soft_bc_then_11k_critic():
+    # their loop: soft BC while epoch < 20 // 2, the critic while epoch <= 20 (epochs of 1k updates), EDAC after
+    plan = lambda cfg, total: [(s.name, s.steps) for s in cfg.schedule(total)]  # noqa: E731
+    authors = make_config("edac", "hopper", preset="authors")
+    assert plan(authors, 3_000_000) == [("actor_pretrain", 10_000), ("critic_pretrain", 11_000),
+                                        ("offline_rl", 2_979_000)]
+    # --pretrain_epochs 200 (Adroit): 100k + 101k
+    assert plan(make_config("edac_bc", "door", preset="authors"), 300_000) == [
+        ("actor_pretrain", 100_000), ("critic_pretrain", 101_000), ("offline_rl", 99_000)]
+    assert plan(make_config("edac", "hopper"), 30_000) == [("actor_pretrain", 10_000), ("critic_pretrain", 10_000),
+                                                           ("offline_rl", 10_000)]
+    # the extra epoch goes to the last pre-training phase, and only as far as the budget has it (their loop too)
+    assert plan(make_config("edac", "hopper", preset="authors", pretrain="actor"), 50_000) == [
+        ("actor_pretrain", 21_000), ("offline_rl", 29_000)]
+    assert plan(authors, 20_400) == [("actor_pretrain", 10_000), ("critic_pretrain", 10_400), ("offline_rl", 0)]
+    assert plan(make_config("edac", "hopper", preset="authors", pretrain="none"), 5_000) == [("offline_rl", 5_000)]
+    with pytest.raises(ValueError, match="pretrain_extra = -1 must be >= 0"):
+        make_config("edac", "hopper", pretrain_extra=-1)
+
+
+def test_edac_hand_over_keeps_every_adam_state_and_freezes_actor_and_alpha_in_critic_pretraining():
+    # the authors build each optimiser once: soft BC, critic pre-training and EDAC step the same Adam states
+    cfg = make_config("edac", "hopper", preset="authors", num_critics=2, hidden=(8,), pretrain_updates=4,
+                      pretrain_extra=1)
+    algo = make_algorithm(cfg, 3, 2, 8)
+    phases = {p.name: p for p in algo.phases(10)}
+    assert [(p.name, p.steps) for p in phases.values()] == [("actor_pretrain", 2), ("critic_pretrain", 3),
+                                                            ("offline_rl", 5)]
+    count = lambda model: int(model.opt_state[0].count)  # noqa: E731  optax.adam's step counter
+    state, batch = algo.init(jax.random.PRNGKey(0)), {k: v[None] for k, v in tiny_batch().items()}
+    for name, steps in (("actor_pretrain", 2), ("critic_pretrain", 3)):
+        before = state
+        for i in range(steps):
+            state, _ = phases[name].update(state, batch, jax.random.PRNGKey(i))
+    assert (count(state.actor), count(state.log_alpha), count(state.critic)) == (2, 2, 3)
+    # the critic phase moved neither the actor nor the temperature
+    assert all(np.array_equal(a, b) for a, b in zip(jax.tree.leaves((before.actor, before.log_alpha)),
+                                                      jax.tree.leaves((state.actor, state.log_alpha))))
+    state, _ = phases["offline_rl"].update(state, batch, jax.random.PRNGKey(9))
+    assert (count(state.actor), count(state.log_alpha), count(state.critic)) == (3, 3, 4)
+
+
+def test_soft_returns_entropies_at_the_observations_or_the_next_observations():
+    n = 6
+    rng = np.random.default_rng(0)
+    data = {"observations": rng.normal(size=(n, 3)), "next_observations": rng.normal(size=(n, 3)),
+            "rewards": rng.normal(size=n), "terminals": np.zeros(n), "timeouts": np.array([0, 0, 1.0, 0, 0, 0])}
+    data = {k: jnp.asarray(v, jnp.float32) for k, v in data.items()}
+    moved = data | {"next_observations": data["next_observations"] + 5.0}
+    key = jax.random.PRNGKey(2)
+    for where, changes in (("observations", False), ("next_observations", True)):
+        algo = make_algorithm(make_config("edac", "hopper", num_critics=2, hidden=(8,), soft_entropy_at=where),
+                              3, 2, n)
+        state = algo.init(jax.random.PRNGKey(0))
+        a, b = (np.asarray(algo.compute_soft_returns(state, d, key).soft_returns) for d in (data, moved))
+        assert (not np.allclose(a, b)) == changes
+    with pytest.raises(ValueError, match="soft_entropy_at = 'states' must be next_observations or observations"):
+        make_config("edac", "hopper", soft_entropy_at="states")
+
+
+def test_figure2_authors_preset_gives_the_authors_edac_schedule():
+    from experiments import figure2
+
+    def edac(argv):
+        return {s.env: s for s in figure2.build(figure2.make_parser().parse_args(["--algos", "edac", *argv]))}
+
+    for env, (critics, budget) in {"hopper": (50, 3_000_000), "halfcheetah": (10, 1_000_000),
+                                   "walker2d": (10, 12_000_000)}.items():
+        study = edac(["--preset", "authors"])[env]
+        cfg = study.config("pretrained")
+        assert (study.updates, cfg.num_critics, cfg.eta) == (budget, critics, 1.0)
+        assert [(s.name, s.steps) for s in cfg.schedule(study.updates)][:2] == [("actor_pretrain", 10_000),
+                                                                                ("critic_pretrain", 11_000)]
+        assert (cfg.timeouts, cfg.soft_entropy_at, cfg.log_alpha_bound) == ("stop", "observations", 10.0)
+    # flags still win; without the preset, the CPU-sized study
+    study = edac(["--preset", "authors", "--edac-updates", "30000", "--num-critics", "4", "--envs", "hopper"])["hopper"]
+    assert (study.updates, study.config("pretrained").num_critics) == (30_000, 4)
+    study = edac(["--envs", "hopper"])["hopper"]
+    cfg = study.config("pretrained")
+    assert (study.updates, cfg.num_critics, cfg.pretrain_updates, cfg.pretrain_extra) == (16_000, 10, 12_000, 0)
 
 
 def test_actor_only_pretraining_without_target_updates_keeps_the_init():
@@ -186,8 +305,9 @@ def test_authors_preset_values_and_precedence():
             td3.timeouts, td3.q_scale_eps, td3.balance, td3.bc_target_updates) == (
         10.0, (256, 256, 256), (256, 256), False, 1e-5, "torch", "stop", 0.0, "signed", False)
     edac = make_config("edac_bc", "walker2d", preset="authors")
-    assert (edac.hidden_bias, edac.tanh_log_det, edac.log_alpha_bound, edac.timeouts, edac.balance) == (
-        0.1, "eps", 10.0, "stop", "signed")
+    assert (edac.hidden_bias, edac.tanh_log_det, edac.log_alpha_bound, edac.timeouts, edac.balance,
+            edac.pretrain_extra, edac.soft_entropy_at, edac.critic_fan) == (
+        0.1, "eps", 10.0, "stop", "signed", 1000, "observations", "out")
     assert make_config("td3bc", "door", preset="authors").alpha == 0.1  # the paper's Table 3, not their config's 1.0
     assert make_config("td3bc", "hopper", preset="authors", timeouts="drop").timeouts == "drop"  # flags win
     assert make_config("cql", "door", preset="authors").alpha_lr == 3e-5

@@ -235,9 +235,9 @@ class Actor(nn.Module):
 class EDAC:
     """CORL's EDAC.  `update(batch, noise)`: temperature, actor, critic (+ target), in that order, each step seeing
     the one before; `noise` = (temperature's, actor's, TD target's) standard-normal draws, each (B, act_dim), or None
-    to sample.  `log_alpha_bound` > 0 clips log alpha after its step.  `pretrain_actor_update` (temperature + soft
-    BC) and `pretrain_critic_update` (regression on soft returns, mean over critics, + eta * diversity) are the
-    paper's pre-training updates."""
+    to sample.  `log_alpha_bound` > 0 clips the alpha `update` uses, not log alpha itself.  `pretrain_actor_update`
+    (temperature + soft BC) and `pretrain_critic_update` (regression on soft returns, mean over critics, + eta *
+    diversity) are the paper's pre-training updates."""
 
     def __init__(self, num_critics: int = 10, eta: float = 1.0, gamma: float = 0.99, tau: float = 0.005,
                  lr: float = 3e-4, obs_dim: int = OBS_DIM, act_dim: int = ACT_DIM,
@@ -275,10 +275,8 @@ class EDAC:
         self.alpha_opt.zero_grad()
         alpha_loss.backward()
         self.alpha_opt.step()
-        if clip and self.log_alpha_bound > 0:
-            with torch.no_grad():
-                self.log_alpha.clamp_(-self.log_alpha_bound, self.log_alpha_bound)
-        self.alpha = self.log_alpha.exp().detach()
+        bound = self.log_alpha_bound
+        self.alpha = (self.log_alpha.clamp(-bound, bound) if clip and bound > 0 else self.log_alpha).exp().detach()
 
     def critic_step(self, loss) -> None:
         self.critic_opt.zero_grad()

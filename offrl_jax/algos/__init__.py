@@ -82,7 +82,8 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
     "published": {"td3bc": {"alpha": 2.5}},
     "authors": {
         "td3bc": _AUTHORS_COMMON | {"actor_hidden": (256, 256, 256), "q_scale_eps": 0.0, "bc_target_updates": False},
-        "sacn": _AUTHORS_COMMON | {"hidden_bias": 0.1, "tanh_log_det": "eps", "log_alpha_bound": 10.0},
+        "sacn": _AUTHORS_COMMON | {"hidden_bias": 0.1, "tanh_log_det": "eps", "log_alpha_bound": 10.0,
+                                   "pretrain_extra": 1000, "soft_entropy_at": "observations", "critic_fan": "out"},
         # CORL's cql.py as the authors ran it: orthogonal init of every layer, log-std offset -1 within [-20, 2],
         # temperature learning rate = policy learning rate, terminals only in the TD target, no EDAC-style output init
         "cql": _AUTHORS_COMMON | {"init": "orthogonal_all", "out_init": False, "log_std_bounds": (-20.0, 2.0),

@@ -37,8 +37,9 @@ from offrl_jax.algos.common import (
     uniform_actions,
 )
 from offrl_jax.algos.config import Config, arch_with_bias, check_cql_fields, require
-from offrl_jax.data.returns import soft_returns_to_go
+from offrl_jax.data.returns import soft_returns_to_go, soft_returns_to_go_from_states
 from offrl_jax.nets import (
+    FANS,
     TANH_LOG_DETS,
     Arch,
     CriticEnsemble,
@@ -46,6 +47,8 @@ from offrl_jax.nets import (
     sample_tanh_gaussian,
     tanh_gaussian_log_prob,
 )
+
+SOFT_ENTROPY_AT = ("next_observations", "observations")  # SACNConfig.soft_entropy_at
 
 
 @dataclasses.dataclass(frozen=True)
@@ -56,6 +59,7 @@ class SACNConfig(Config):
     eta: float = 1.0  # EDAC's ensemble-diversity weight (0 = SAC-N)
     alpha_lr: float = 3e-4  # Adam learning rate of the entropy temperature
     hidden_bias: float | None = None  # constant hidden-layer bias; CORL's EDAC: 0.1
+    critic_fan: str = "in"  # the critics' "torch" init bound 1/sqrt(fan): in, or out (CORL's VectorizedLinear)
     out_init: bool = True  # final layers U(+-1e-3) actor, U(+-3e-3) critics (EDAC); False: the init scheme's own
     log_std_bounds: tuple[float, float] = (-5.0, 2.0)  # EDAC; CORL's CQL: (-20, 2)
     log_std_offset: float = 0.0  # added to the raw log-std before clipping; CORL's CQL: -1
@@ -69,6 +73,13 @@ class SACNConfig(Config):
     cql_actions: int = 10  # CQL: uniform actions sampled per state
     cql_temperature: float = 1.0  # CQL: logsumexp temperature
     actor_pretrain_fraction: float = 0.5  # share of pretrain_updates spent on soft BC (the rest: critic regression)
+    # updates added to the last pre-training phase after pretrain_updates, taken from offline RL while it has them;
+    # the authors' loop pre-trains while epoch <= pretrain_epochs, one 1k-update epoch more than it names: 1000
+    pretrain_extra: int = 0
+    # where the soft returns' entropies are sampled (`data.returns`): next_observations (each row's successor; the
+    # last row of an episode gets its successor's) or observations (each row's own state, the authors' code: the
+    # last row gets none and a time-out's tail repeats H(s_T))
+    soft_entropy_at: str = "next_observations"
     entropy_batch: int = 16_384  # rows per batch when computing the per-state entropies for the soft returns
     # CQL (CORL's cql.py): temperature, actor and critic losses all from the state before the update; False = EDAC
     # (CORL's edac.py): temperature, then actor, then critic, each seeing the step before
@@ -79,25 +90,19 @@ class SACNConfig(Config):
     def __post_init__(self):
         super().__post_init__()
         check_cql_fields(self)
-        if self.entropy_batch < 1:
-            raise ValueError(f"SACNConfig.entropy_batch = {self.entropy_batch} must be >= 1")
-        if not self.eta >= 0:
-            raise ValueError(f"SACNConfig.eta = {self.eta} must be >= 0")
-        if self.eta > 0 and self.num_critics < 2:
-            raise ValueError(f"SACNConfig.num_critics = {self.num_critics} must be >= 2 for EDAC (eta > 0)")
-        if not 0.0 <= self.actor_pretrain_fraction <= 1.0:
-            raise ValueError(f"SACNConfig.actor_pretrain_fraction = {self.actor_pretrain_fraction} must be in [0, 1]")
         if self.alpha_lr <= 0 or self.init_alpha <= 0:
             raise ValueError("SACNConfig.alpha_lr and init_alpha must be positive")
-        lo, hi = self.log_std_bounds
-        if not lo < hi:
-            raise ValueError(f"SACNConfig.log_std_bounds = {self.log_std_bounds} must be (low, high) with low < high")
-        if self.tanh_log_det not in TANH_LOG_DETS:
-            raise ValueError(f"SACNConfig.tanh_log_det = {self.tanh_log_det!r} must be one of "
-                             f"{', '.join(TANH_LOG_DETS)}")
-        if not self.log_alpha_bound >= 0:
-            raise ValueError(f"SACNConfig.log_alpha_bound = {self.log_alpha_bound} must be >= 0")
         require(self, [
+            ("entropy_batch", self.entropy_batch >= 1, "must be >= 1"),
+            ("eta", self.eta >= 0, "must be >= 0"),
+            ("num_critics", not (self.eta > 0 and self.num_critics < 2), "must be >= 2 for EDAC (eta > 0)"),
+            ("actor_pretrain_fraction", 0.0 <= self.actor_pretrain_fraction <= 1.0, "must be in [0, 1]"),
+            ("pretrain_extra", self.pretrain_extra >= 0, "must be >= 0"),
+            ("log_std_bounds", self.log_std_bounds[0] < self.log_std_bounds[1], "must be (low, high) with low < high"),
+            ("tanh_log_det", self.tanh_log_det in TANH_LOG_DETS, f"must be one of {', '.join(TANH_LOG_DETS)}"),
+            ("log_alpha_bound", self.log_alpha_bound >= 0, "must be >= 0"),
+            ("critic_fan", self.critic_fan in FANS, f"must be {' or '.join(FANS)}"),
+            ("soft_entropy_at", self.soft_entropy_at in SOFT_ENTROPY_AT, f"must be {' or '.join(SOFT_ENTROPY_AT)}"),
             ("bc_weight", self.bc_weight >= 0, "must be >= 0 (0 = off)"),
             ("cql_alpha", self.cql_alpha >= 0, "must be >= 0 (0 = off)"),
         ])
@@ -107,10 +112,13 @@ class SACNConfig(Config):
 
     def schedule(self, total_updates: int) -> list[Stage]:
         """Pre-training in two phases, soft BC ("actor_pretrain", `actor_pretrain_fraction` of `pretrain_updates`)
-        then the critic on soft returns ("critic_pretrain"), then offline RL."""
+        then the critic on soft returns ("critic_pretrain", the rest and `pretrain_extra`), then offline RL."""
         pre, rl = split_budget(total_updates, 0 if self.pretrain == "none" else self.pretrain_updates)
         actor_steps = {"actor": pre, "critic": 0, "actor+critic": int(pre * self.actor_pretrain_fraction)}.get(
             self.pretrain, 0)
+        extra = min(self.pretrain_extra, rl) if pre else 0  # one more epoch of the last pre-training phase
+        pre, rl = pre + extra, rl - extra
+        actor_steps += extra if self.pretrain == "actor" else 0
         stages = [Stage("actor_pretrain", actor_steps, auto_stop=self.auto_stop(("soft_bc_loss",))),
                   Stage("critic_pretrain", pre - actor_steps, auto_stop=self.auto_stop(("mc_error",)))]
         return [s for s in stages if s.steps] + [Stage("offline_rl", rl)]
@@ -132,7 +140,8 @@ class SACN:
                                        tuple(config.log_std_bounds), config.log_std_offset,
                                        1e-3 if config.out_init else None)
         critic_kw = dict(num=config.num_critics, hidden=config.hidden, layer_norm=config.critic_layer_norm,
-                         out_scale=3e-3 if config.out_init else None, arch=arch)
+                         out_scale=3e-3 if config.out_init else None,
+                         arch=dataclasses.replace(arch, fan=config.critic_fan))
         self.critic = CriticEnsemble(**critic_kw)
         self.critic_per_member = CriticEnsemble(**critic_kw, per_member_actions=True)  # same parameters
         self.actor_tx, self.critic_tx = optax.adam(config.actor_lr), optax.adam(config.critic_lr)
@@ -167,32 +176,33 @@ class SACN:
 
     # ---------------------------------------------------------------------------------------- soft returns
     def compute_soft_returns(self, state: SACNState, data: Batch, key: jax.Array) -> SACNState:
-        """Entropy -log pi(a~|s') at every next observation (in batches), folded into soft returns-to-go."""
-        next_obs = data["next_observations"]
-        n, size = next_obs.shape[0], self.cfg.entropy_batch
+        """Entropy -log pi(a~|s) of one sampled action at every next observation, or every observation
+        (`soft_entropy_at`; in batches), folded into soft returns-to-go with the temperature as it stands."""
+        obs = data[self.cfg.soft_entropy_at]
+        n, size = obs.shape[0], self.cfg.entropy_batch
         pad = (-n) % size
-        chunks = jnp.pad(next_obs, ((0, pad), (0, 0))).reshape(-1, size, next_obs.shape[1])
-
-        def entropy(args):
-            obs, k = args
-            _, log_prob = self.sample_policy(state.actor.params, obs, k)
-            return -log_prob
-
-        keys = jax.random.split(key, chunks.shape[0])
-        entropies = jax.lax.map(entropy, (chunks, keys)).reshape(-1)[:n]
-        alpha = jnp.exp(state.log_alpha.params)
-        returns = soft_returns_to_go(data["rewards"], entropies, data["terminals"], data["timeouts"],
-                                     self.cfg.gamma, alpha)
+        chunks = jnp.pad(obs, ((0, pad), (0, 0))).reshape(-1, size, obs.shape[1])
+        entropy = lambda args: -self.sample_policy(state.actor.params, *args)[1]  # noqa: E731  (obs, key) -> (B,)
+        entropies = jax.lax.map(entropy, (chunks, jax.random.split(key, chunks.shape[0]))).reshape(-1)[:n]
+        fold = soft_returns_to_go if self.cfg.soft_entropy_at == "next_observations" else soft_returns_to_go_from_states
+        returns = fold(data["rewards"], entropies, data["terminals"], data["timeouts"], self.cfg.gamma,
+                       self.alpha(state, clip=False))
         return state.replace(soft_returns=returns)
 
     # --------------------------------------------------------------------------------------------- pieces
+    def alpha(self, state: SACNState, clip: bool) -> jax.Array:
+        """The temperature; `clip` (offline RL, as the authors' code): exp of log alpha clipped to
+        +-log_alpha_bound when that is set, the parameter itself left where its steps take it."""
+        bound, log_alpha = self.cfg.log_alpha_bound, state.log_alpha.params
+        return jnp.exp(jnp.clip(log_alpha, -bound, bound) if clip and bound > 0 else log_alpha)
+
     def sample_policy(self, actor_params, obs: jax.Array, key: jax.Array):
         return sample_tanh_gaussian(key, *self.actor.apply(actor_params, obs), self.cfg.tanh_log_det)
 
-    def td_target(self, state: SACNState, batch: Batch, key: jax.Array) -> jax.Array:
+    def td_target(self, state: SACNState, batch: Batch, key: jax.Array, clip: bool = True) -> jax.Array:
         next_action, next_log_prob = self.sample_policy(state.actor.params, batch["next_observations"], key)
         next_q = self.critic.apply(state.critic.target, batch["next_observations"], next_action)
-        alpha = jnp.exp(state.log_alpha.params) if self.cfg.backup_entropy else 0.0
+        alpha = self.alpha(state, clip) if self.cfg.backup_entropy else 0.0
         return L.td_target(batch["rewards"], done_flags(batch, self.cfg.timeouts),
                            L.soft_value(next_q, next_log_prob, alpha), self.cfg.gamma)
 
@@ -224,7 +234,7 @@ class SACN:
         cfg = self.cfg
         k_target, k_cql = jax.random.split(key)
         q, diversity = self.q_and_diversity(params, batch)
-        td_fn = lambda: self.td_target(state, batch, k_target)  # noqa: E731
+        td_fn = lambda: self.td_target(state, batch, k_target, clip=not pretraining)  # noqa: E731
         if pretraining:  # the authors' EDAC pre-training averages over critics; its TD loss (below) sums over them
             mc = state.soft_returns[batch["idx"]]
             loss = L.pretrain_critic_loss(q, mc, td_fn, cfg.lam, cfg.lambda_mode, per_critic="mean", form=cfg.balance)
@@ -243,7 +253,7 @@ class SACN:
     def actor_loss(self, params, state: SACNState, batch: Batch, key: jax.Array):
         action, log_prob = self.sample_policy(params, batch["observations"], key)
         q = self.critic.apply(state.critic.params, batch["observations"], action)
-        loss = L.sac_actor_loss(q, log_prob, jnp.exp(state.log_alpha.params))
+        loss = L.sac_actor_loss(q, log_prob, self.alpha(state, clip=True))
         bc = L.bc_loss(action, batch["actions"])  # logged always: how far the policy has moved from the data
         metrics = {"actor_loss": loss, "entropy": -jnp.mean(log_prob), "bc_mse": bc}
         if self.cfg.bc_weight > 0:
@@ -254,24 +264,21 @@ class SACN:
         mean, log_std = self.actor.apply(params, batch["observations"])
         _, log_prob_sampled = sample_tanh_gaussian(key, mean, log_std, self.cfg.tanh_log_det)
         log_prob_data = tanh_gaussian_log_prob(mean, log_std, batch["actions"], log_det=self.cfg.tanh_log_det)
-        loss = L.soft_bc_loss(log_prob_sampled, log_prob_data, jnp.exp(state.log_alpha.params))
+        loss = L.soft_bc_loss(log_prob_sampled, log_prob_data, self.alpha(state, clip=False))
         return loss, {"soft_bc_loss": loss, "entropy": -jnp.mean(log_prob_sampled)}
 
     # ------------------------------------------------------------------------------------ update functions
     def temperature_update(self, state: SACNState, batch: Batch, key: jax.Array, clip: bool = False):
-        """One step on the temperature; `clip` (offline RL only, as the authors' code): log alpha to
-        +-log_alpha_bound when that is set."""
+        """One step on the temperature; `clip`: offline RL, where the temperature used is `alpha(clip=True)`."""
         _, log_prob = self.sample_policy(state.actor.params, batch["observations"], key)
 
         def loss_fn(log_alpha):
             loss = L.temperature_loss(log_alpha, log_prob, self.target_entropy)
-            return loss, {"alpha": jnp.exp(log_alpha), "alpha_loss": loss}
+            return loss, {"alpha_loss": loss}
 
         log_alpha, metrics = gradient_step(state.log_alpha, self.alpha_tx, loss_fn)
-        if clip and self.cfg.log_alpha_bound > 0:
-            bound = self.cfg.log_alpha_bound
-            log_alpha = log_alpha.replace(params=jnp.clip(log_alpha.params, -bound, bound))
-        return state.replace(log_alpha=log_alpha), metrics
+        state = state.replace(log_alpha=log_alpha)
+        return state, metrics | {"alpha": self.alpha(state, clip)}
 
     def soft_bc_update(self, state: SACNState, batch: Batch, key: jax.Array):
         actor, metrics = gradient_step(state.actor, self.actor_tx, self.soft_bc_loss, state, batch, key)

@@ -31,8 +31,9 @@ from typing import Any
 
 from offrl_jax.algos import FAMILIES
 from offrl_jax.algos.config import REPLAY_MODES, TIMEOUTS
+from offrl_jax.algos.sacn import SOFT_ENTROPY_AT
 from offrl_jax.losses import BALANCES
-from offrl_jax.nets import INITS, TANH_LOG_DETS
+from offrl_jax.nets import FANS, INITS, TANH_LOG_DETS
 from offrl_jax.run.loggers import LOGGERS
 from offrl_jax.run.study import MAX_MEMBERS
 from offrl_jax.system.cli import int_at_least, integer, number, positive_int, seed_int
@@ -44,7 +45,7 @@ NOT_FLAGS = frozenset({"pretrain", "pretrain_updates", "pretrain_auto", "bc_only
 FLAG_FIELDS = frozenset(f.name for cls in CONFIGS for f in dataclasses.fields(cls)) - NOT_FLAGS
 # the accepted values of the str fields, the same tuples their configs' __post_init__ checks use
 CHOICES = {"init": INITS, "timeouts": TIMEOUTS, "balance": BALANCES, "tanh_log_det": TANH_LOG_DETS,
-           "replay": REPLAY_MODES}
+           "replay": REPLAY_MODES, "soft_entropy_at": SOFT_ENTROPY_AT, "critic_fan": FANS}
 ALIASES = {"actor_layer_norm": ("--actor-ln",), "critic_layer_norm": ("--critic-ln",),
            "layer_norm_affine": ("--ln-affine",)}
 

@@ -63,7 +63,8 @@ def parser(prog: str, doc: str, updates: int = 100_000,
              "--algo's below; --dry-run shows another's).  Default: per algorithm and env")
     help_authors = ("authors: the authors' code switch by switch (LayerNorm without scale/bias and eps 1e-5, "
                     "PyTorch init, a 3x256 TD3+BC actor, no bootstrap at time-outs, x/sg(x) loss balancing, the "
-                    "paper's per-env alphas; docs/fidelity.md); flags given with it override single values")
+                    "paper's per-env alphas, EDAC's 10k + 11k pre-training; docs/fidelity.md); flags given with it "
+                    "override single values")
     help_default = (f"published: TD3+BC's published alpha ({PRESETS['published']['td3bc']['alpha']}) instead of the "
                     "paper's per-env values.  " if "published" in PRESETS else "")
     help_default += (f"Default: {default_preset}" if default_preset else

@@ -64,14 +64,41 @@ def soft_returns_to_go(
     A terminal's successor is absorbing (no entropy bonus); a time-out's tail r'_T / (1 - gamma) repeats the entropy
     bonus as well as the reward.
 
-    Versus the authors' `compute_soft_returns_to_go` (entropies at s_t, `discount_cumsum(include_first=False)`):
-    inside an episode the two are identical.  At its last row T they give the soft part 0 and row T-1 the bonus
-    gamma H(s_T) / (1 - gamma); here row T gets gamma alpha H(s_{T+1}) (/ (1 - gamma) at a time-out), the entropy of
-    the state the episode actually continues from, so the last row is not the only one without an entropy term.
+    Versus the authors' form (`soft_returns_to_go_from_states`): inside an episode the two are identical.  At its
+    last row T they give the soft part 0 and row T-1 the bonus gamma H(s_T) / (1 - gamma); here row T gets gamma
+    alpha H(s_{T+1}) (/ (1 - gamma) at a time-out), the entropy of the state the episode actually continues from,
+    so the last row is not the only one without an entropy term.
     """
     rewards = jnp.asarray(rewards, jnp.float32)
     terminal = jnp.asarray(terminals) > 0
     soft_rewards = rewards + jnp.where(terminal, 0.0, gamma * alpha * next_entropies)
     ends, tail = _episode_flags(terminal, jnp.asarray(timeouts), timeout_tail)
     values = jnp.where(tail, soft_rewards / (1.0 - gamma), soft_rewards)
+    return _discounted_sum(values, ends, gamma)
+
+
+@jax.jit(static_argnames=("timeout_tail",))
+def soft_returns_to_go_from_states(
+    rewards: jax.Array,
+    entropies: jax.Array,
+    terminals: jax.Array,
+    timeouts: jax.Array,
+    gamma: float,
+    alpha: jax.Array | float,
+    timeout_tail: bool = True,
+) -> jax.Array:
+    """The authors' soft return-to-go: R_t + alpha sum_{k=t+1}^{T} gamma^(k-t) H'_k.  (T,) each -> (T,).
+
+    `entropies[t]` is the entropy estimate at the row's own observation s_t; T is the episode's last row, and H'_T
+    is H_T / (1 - gamma) where the reward gets its tail (a time-out or the dataset end).  So the last row of an
+    episode has no entropy term, and the row before it carries gamma H(s_T) / (1 - gamma) (`soft_returns_to_go`
+    gives the last row gamma alpha H(s_{T+1}) instead).  Written as the plain return of
+    r'_t = r_t + gamma alpha H'_{t+1} (0 on the episode's last row).
+    """
+    rewards = jnp.asarray(rewards, jnp.float32)
+    entropies = jnp.asarray(entropies, jnp.float32)
+    ends, tail = _episode_flags(jnp.asarray(terminals), jnp.asarray(timeouts), timeout_tail)
+    tailed = lambda x: jnp.where(tail, x / (1.0 - gamma), x)  # noqa: E731
+    next_entropies = jnp.append(tailed(entropies)[1:], 0.0)  # H'_{t+1}, within the episode (ends: unused)
+    values = tailed(rewards) + jnp.where(ends, 0.0, gamma * alpha * next_entropies)
     return _discounted_sum(values, ends, gamma)
