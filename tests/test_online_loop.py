@@ -285,6 +285,22 @@ def test_warm_up_evaluations_keep_the_hand_over_on_the_update_axis():
     assert _best_scores(rows[:2]) == {"a": 40.0} and _best_scores(rows) == {"a": 60.0}  # not the two averaged
 
 
+def test_warm_up_evaluations_are_read_back_beside_the_hand_over_row(tmp_path):
+    """A warm-up that reaches the first online evaluations writes rows at the hand-over's update, each at its env
+    step: curves.csv reads them back (report and --resume), and a row repeated at the same env step is refused."""
+    from offrl_jax.run.results import write_curves
+
+    rows = [{"variant": "a", "algo": "td3bc", "seed": s, "phase": "offline_rl", "update": 300, "seconds": 1.0,
+             "score": 40.0} for s in (0, 1)]
+    rows += [{"variant": "a", "algo": "td3bc", "seed": s, "phase": "online", "update": 300, "seconds": 2.0,
+              "score": 10.0, "env_steps": step} for step in (200, 400) for s in (0, 1)]
+    write_curves(tmp_path / "curves.csv", rows)
+    assert len(read_curves(tmp_path / "curves.csv")) == 6
+    write_curves(tmp_path / "curves.csv", rows + rows[-1:])
+    with pytest.raises(ValueError, match="seed 1 has two rows at update 300 \\(env step 400\\)"):
+        read_curves(tmp_path / "curves.csv")
+
+
 def test_finetune_from_a_finished_offline_run_starts_at_its_checkpoint(tmp_path):
     offline = tmp_path / "offline"
     argv = ["--env", "hopper", "--updates", "400", "--eval-every", "200", "--seeds", "2", "--max-transitions",
