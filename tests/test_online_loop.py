@@ -2,6 +2,7 @@
 driver's member axis, and `experiments.finetune` end to end (run, resume inside the online phase, refusals)."""
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -334,6 +335,20 @@ def test_finetune_from_a_finished_offline_run_starts_at_its_checkpoint(tmp_path)
     assert resumed.returncode == 0 and "starts again from the hand-over" in resumed.stderr, resumed.stderr
     no_time = lambda rows: [{k: v for k, v in r.items() if k != "seconds"} for r in rows]  # noqa: E731
     assert no_time(read_curves(out / "curves.csv")) == no_time(after)
+    # as if killed after its hand-over was saved and before its first online evaluation: no last checkpoint yet,
+    # curves.csv has the offline rows; the policy acts from the hand-over, and --resume goes on from there
+    from offrl_jax.run.results import write_curves
+
+    (out / "checkpoints" / "pretrained.msgpack").unlink()
+    (out / "summary.json").unlink()
+    shutil.rmtree(out / "online")
+    write_curves(out / "curves.csv", [r for r in after if r["phase"] != "online"])
+    assert load_policy(out, "pretrained").update == 400
+    resumed = run_module("experiments.finetune", "--resume", out, "--no-progress", "--parallel", "1")
+    assert resumed.returncode == 0, resumed.stderr
+    assert no_time(read_curves(out / "curves.csv")) == no_time(after)
+    refused = run_module("offrl_jax.rollout", offline, "--checkpoint", "handover")  # never fine-tuned
+    assert refused.returncode == 2 and "no online phase (it was never fine-tuned)" in refused.stderr, refused.stderr
 
 
 def test_the_online_rl_arm_has_no_offline_phase_and_no_behaviour_term(tmp_path):

@@ -186,6 +186,12 @@ def check_resume(study: Study, out_dir: Path, ds, data_sha256: str) -> None:
         path, labels = checkpoint_path(out_dir, group), {v.label for v in group}
         if path.exists() and not path.is_file():
             raise ResumeMismatch(f"{path} is not a checkpoint file; nothing was changed")
+        handover = checkpoint_path(out_dir, group, "handover")
+        if not path.is_file() and study.start_from is not None and not any(
+                r.get("env_steps") for r in rows if r.get("variant") in labels):
+            if not handover.is_file():  # stopped before its hand-over: it starts from the finished run again
+                continue
+            path = handover  # stopped before its first online evaluation: it goes on from its hand-over
         if not path.is_file():
             done = [int(r["update"]) for r in rows if r.get("variant") in labels]
             if done:
