@@ -35,10 +35,12 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
+from offrl_jax.algos import make_algorithm
 from offrl_jax.algos.config import ONLINE_FIELDS
 from offrl_jax.app.command import run_command
 from offrl_jax.app.outputs import saved_studies
 from offrl_jax.app.studies import HPARAM_DESTS, given, make_study, parser, study_variants
+from offrl_jax.envs.registry import get_env_spec
 from offrl_jax.online.config import OnlineConfig
 from offrl_jax.run.study import Study, reference_label
 from offrl_jax.system.cli import UsageError, int_at_least, positive_int
@@ -60,7 +62,10 @@ ONLINE_FLAGS = {"online_steps": "steps", "online_block": "block", "utd": "utd", 
 
 def build(args) -> Study:
     if args.from_run is not None:
-        return from_run(args, online_config(args))
+        return check_online_flags(from_run(args, online_config(args)), given(args))
+    if args.variant is not None:
+        raise UsageError("--variant chooses among the variants of a finished run given with --from; without it "
+                         "the variants are --arms")
     if args.algo == "bc":
         raise UsageError("--algo bc: behaviour cloning has no offline-RL phase and no critic to fine-tune online "
                          "(the pretrain-only arm is imitation, then improvement online)")
@@ -77,8 +82,39 @@ def build(args) -> Study:
     whole = {"pretrain_updates": args.updates}  # pretrain-only's, whatever --pretrain-updates gives the others
     variants = tuple(v for arm in args.arms for v in study_variants(
         arm, args.algo, own[arm], args, fixed=whole if arm == "pretrain-only" else None))
-    return make_study(args.env, args.algo, args.level, args, extra={"online": online}, variants=variants,
-                      reference="scratch" if "scratch" in args.arms else None)
+    return check_online_flags(make_study(args.env, args.algo, args.level, args, extra={"online": online},
+                                         variants=variants, reference="scratch" if "scratch" in args.arms else None),
+                              given(args))
+
+
+def check_online_flags(study: Study, values: dict) -> Study:
+    """`study`, unless an online flag given (`values`) does nothing for one of its variants: --online-mix where the
+    replay does not mix (online-only, append), --explore-noise where the actor explores with a sample."""
+    for v in study.variants:
+        config = study.config(v.label)
+        if "online_mix" in values and config.replay != "mix":
+            raise UsageError(f"--online-mix: {v.label} draws its minibatches with replay {config.replay}, which "
+                             "does not mix (the mix is the online share of each minibatch with --replay mix)")
+        if "explore_noise" in values and samples(config, study.env):
+            raise UsageError(f"--explore-noise: {v.label}'s actor is stochastic and explores with a sample of its "
+                             "policy; the noise is added only to a deterministic actor's action")
+    return study
+
+
+def samples(config, env: str) -> bool:
+    """Whether a variant's actor explores with a sample (its family's `explore` gives an action), traced abstractly:
+    nothing is computed."""
+    import jax
+    import jax.numpy as jnp
+
+    spec = get_env_spec(env)
+    algo = make_algorithm(config, spec.obs_dim, spec.act_dim, 1)
+    explore = getattr(algo, "explore", None)
+    if explore is None:
+        return False
+    state = jax.eval_shape(algo.init, jax.random.PRNGKey(0))
+    obs = jax.ShapeDtypeStruct((spec.obs_dim,), jnp.float32)
+    return jax.eval_shape(explore, state, obs, jax.random.PRNGKey(0)) is not None
 
 
 def online_config(args) -> OnlineConfig:
@@ -95,6 +131,8 @@ def from_run(args, online: OnlineConfig) -> Study:
     """The online phase of a finished offline run: its study (variants, seeds, data, budget) with `online`, the
     online fields given, and `start_from` its directory, whose checkpoints the runner starts from."""
     run = args.from_run
+    if args.variant is not None and len(set(args.variant)) != len(args.variant):
+        raise UsageError(f"--variant {' '.join(args.variant)}: a variant is named twice (each is fine-tuned once)")
     typed = set(getattr(args, "typed", ())) - FROM_FLAGS - set(ONLINE_FLAGS) - ONLINE_FIELDS
     if typed:
         names = ", ".join(sorted("--" + t.replace("_", "-") for t in typed))

@@ -223,12 +223,31 @@ def test_a_run_killed_inside_the_online_phase_goes_on_from_its_last_checkpoint_e
     (["--replay", "sometimes"], "invalid choice"),
     (["--algo", "iql", "--arms", "online-rl"], "no form without its behaviour terms"),
     (["--buffer-capacity", "500"], "give a capacity of at least 1999"),  # before the offline phases, not after
+    # a flag that would do nothing: the mix where the replay does not mix, noise where the actor samples
+    (["--replay", "online-only", "--online-mix", "0.3"], "replay online-only, which does not mix"),
+    (["--replay", "append", "--online-mix", "0.3"], "replay append, which does not mix"),
+    (["--algo", "iql", "--online-mix", "0.2"], "replay append, which does not mix"),  # IQL's own replay
+    (["--algo", "edac", "--explore-noise", "0.3"], "actor is stochastic"),
+    (["--algo", "iql", "--no-deterministic", "--explore-noise", "0.3"], "actor is stochastic"),
+    (["--variant", "pretrained"], "--variant chooses among the variants of a finished run given with --from"),
+    (["--from", "somewhere", "--variant", "pretrained", "pretrained"], "a variant is named twice"),
 ])
 def test_finetune_refuses_bad_online_settings_in_one_line(tmp_path, args, fragment):
     result = run_module("experiments.finetune", *args, "--out", tmp_path / "x")
     assert result.returncode == 2
     assert fragment in result.stderr and len(result.stderr.strip().splitlines()) == 1, result.stderr
     assert not (tmp_path / "x").exists()
+
+
+def test_an_actor_samples_or_takes_the_exploration_noise():
+    from experiments.finetune import samples
+
+    def config(algo, **kw):
+        return make_config(algo, "hopper", hidden=(8, 8), **kw)
+
+    assert not samples(config("td3bc"), "hopper") and not samples(config("rebrac"), "hopper")
+    assert not samples(config("iql", deterministic=True), "hopper")  # noise: its action is deterministic
+    assert samples(config("edac"), "hopper") and samples(config("iql", deterministic=False), "hopper")
 
 
 def test_online_measures_by_hand():
