@@ -42,6 +42,7 @@ from offrl_jax.app.outputs import saved_studies
 from offrl_jax.app.studies import HPARAM_DESTS, given, make_study, parser, study_variants
 from offrl_jax.envs.registry import get_env_spec
 from offrl_jax.online.config import OnlineConfig
+from offrl_jax.run.results import read_curves, short_curves
 from offrl_jax.run.study import Study, reference_label
 from offrl_jax.system.cli import UsageError, int_at_least, positive_int
 
@@ -137,6 +138,14 @@ def from_run(args, online: OnlineConfig) -> Study:
     if typed:
         names = ", ".join(sorted("--" + t.replace("_", "-") for t in typed))
         raise UsageError(f"--from keeps {run}'s settings, so {names} cannot be given with it (online flags can)")
+    if not (run / "config.json").is_file():
+        what = "does not exist" if not run.exists() else "is not a directory" if not run.is_dir() else \
+            "holds no config.json"
+        raise UsageError(f"--from {run}: it {what}; --from takes the directory of a finished offline run (e.g. "
+                         "runs/mujoco_medium/RUN)")
+    if args.out is not None and Path(args.out).resolve() == run.resolve():
+        raise UsageError(f"--out {args.out} is the run given with --from: fine-tuning writes a new run and keeps "
+                         "that one; give another --out")
     saved = saved_studies(run)
     if isinstance(saved, list):
         raise UsageError(f"--from {run}: it holds several studies; give one of its sub-directories")
@@ -151,6 +160,7 @@ def from_run(args, online: OnlineConfig) -> Study:
         if chosen and len(chosen) < len(group):
             raise UsageError(f"--variant: {', '.join(v.label for v in group)} were trained as one program (one "
                              "checkpoint); give all of them")
+    unfinished(run, saved, labels)
     values = {k: v for k, v in given(args).items() if k in ONLINE_FIELDS}
     variants = tuple(dataclasses.replace(v, overrides=tuple(sorted((dict(v.overrides) | values).items())),
                                          flags=tuple(v.flags or ()) + tuple(values))
@@ -158,6 +168,21 @@ def from_run(args, online: OnlineConfig) -> Study:
     reference = saved.reference if any(reference_label(saved, v.label) in labels for v in variants) else None
     return dataclasses.replace(saved, variants=variants, online=online, reference=reference,
                                start_from=str(run.resolve()))
+
+
+def unfinished(run: Path, saved: Study, labels: list[str]) -> None:
+    """Refuse (before anything is written) a --from run whose chosen variants' curves end before their offline
+    budget: it was stopped, and starts no online phase until it is finished (the runner checks its checkpoints)."""
+    try:
+        rows = read_curves(run / "curves.csv") if (run / "curves.csv").is_file() else []
+    except (OSError, ValueError) as e:
+        raise UsageError(f"--from {run}: {e}") from None
+    short = short_curves(rows, {label: saved.config(label).budget(saved.updates) for label in labels})
+    if short:
+        label, update = next(iter(short.items()))
+        at = "has no evaluation yet" if update is None else f"stopped at update {update:,}"
+        raise UsageError(f"--from {run}: {label} {at} of {saved.config(label).budget(saved.updates):,}, so its "
+                         f"offline phases are not finished: finish them first (--resume {run})")
 
 
 def make_parser():

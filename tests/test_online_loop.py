@@ -231,6 +231,9 @@ def test_a_run_killed_inside_the_online_phase_goes_on_from_its_last_checkpoint_e
     (["--algo", "iql", "--no-deterministic", "--explore-noise", "0.3"], "actor is stochastic"),
     (["--variant", "pretrained"], "--variant chooses among the variants of a finished run given with --from"),
     (["--from", "somewhere", "--variant", "pretrained", "pretrained"], "a variant is named twice"),
+    # what the int32 update counter cannot count: the online updates, and with the offline ones
+    (["--online-steps", "400", "--online-block", "200", "--utd", "10000000"], "past what the update counter holds"),
+    (["--online-steps", "400", "--online-block", "200", "--utd", "5368700"], "its offline and online updates"),
 ])
 def test_finetune_refuses_bad_online_settings_in_one_line(tmp_path, args, fragment):
     result = run_module("experiments.finetune", *args, "--out", tmp_path / "x")
@@ -368,6 +371,35 @@ def test_finetune_from_a_finished_offline_run_starts_at_its_checkpoint(tmp_path)
     assert no_time(read_curves(out / "curves.csv")) == no_time(after)
     refused = run_module("offrl_jax.rollout", offline, "--checkpoint", "handover")  # never fine-tuned
     assert refused.returncode == 2 and "no online phase (it was never fine-tuned)" in refused.stderr, refused.stderr
+
+
+def test_finetune_from_refuses_what_is_not_a_finished_run_before_writing(tmp_path):
+    """--from a missing directory, a file, an empty directory, a run stopped before the end of its offline phases,
+    or --out the run itself: one line saying what --from wants, and no --out created."""
+    from experiments.mujoco_medium import build, make_parser
+    from offrl_jax.run.results import write_curves
+
+    (tmp_path / "file").write_text("x")
+    (tmp_path / "empty").mkdir()
+    stopped = tmp_path / "stopped"
+    stopped.mkdir()
+    study = build(make_parser().parse_args(["--updates", "400", "--eval-every", "200", "--seeds", "2",
+                                            "--pretrain-updates", "200", "--hidden", "16", "16"]))
+    (stopped / "config.json").write_text(study.to_json())
+    write_curves(stopped / "curves.csv", [{"variant": v, "algo": "td3bc", "seed": s, "phase": "offline_rl",
+                                           "update": 200, "seconds": 1.0, "score": 10.0}
+                                          for v in ("pretrained", "scratch") for s in (0, 1)])
+    out = tmp_path / "out"
+    for source, fragment in ((tmp_path / "missing", "it does not exist; --from takes the directory of a finished"),
+                             (tmp_path / "file", "it is not a directory"),
+                             (tmp_path / "empty", "it holds no config.json"),
+                             (stopped, "pretrained stopped at update 200 of 400, so its offline phases are not "
+                                       f"finished: finish them first (--resume {stopped})")):
+        refused = run_module("experiments.finetune", "--from", source, "--out", out)
+        assert refused.returncode == 2 and fragment in refused.stderr, refused.stderr
+        assert len(refused.stderr.strip().splitlines()) == 1 and not out.exists()
+    refused = run_module("experiments.finetune", "--from", stopped, "--out", stopped, "--overwrite")
+    assert refused.returncode == 2 and "is the run given with --from" in refused.stderr, refused.stderr
 
 
 def test_the_online_rl_arm_has_no_offline_phase_and_no_behaviour_term(tmp_path):

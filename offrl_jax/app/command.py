@@ -406,6 +406,8 @@ def run_command(build: Build, parser: argparse.ArgumentParser, argv=None,
     try:
         command.read(build, hparams, hparam_dests)
         if getattr(command.args, "dry_run", False):
+            for study in command.studies:  # the data it names is there (a run would refuse it at once)
+                catalogue.check_there(study.dataset)
             print(describe(command.studies))
             ok = True
             return 0

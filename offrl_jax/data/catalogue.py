@@ -149,6 +149,20 @@ def _load_generated(name: str, max_transitions, clip_actions, generate_if_missin
     return dataclasses.replace(ds, name=name)
 
 
+def check_there(name_or_path) -> None:
+    """Raise DatasetError (what `load` would) unless `name_or_path` is a known dataset, an existing file or folder,
+    or a Minari id in `minari_root()`; nothing is read (`--dry-run`'s check of the data it names)."""
+    name = str(name_or_path)
+    if name in SHARED_NAMES or name in KNOWN or split_version(name)[0] in KNOWN or Path(name).exists():
+        return
+    if (minari_root() / name).is_dir():
+        return
+    looks_like_path = Path(name).suffix.lower() in FILE_SUFFIXES or "/" in name
+    if not looks_like_path:
+        raise _unknown(name)
+    raise DatasetError(f"{name}: no such file, directory or Minari dataset id (looked in {minari_root()})")
+
+
 def load(name_or_path, *, max_transitions: int | None = None, clip_actions: bool | None = None,
          generate_if_missing: bool = True, env: str | None = None) -> Dataset:
     """A validated `Dataset` from a known name (see `KNOWN`) or a path / Minari id (see `load_dataset_path`).
