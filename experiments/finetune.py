@@ -33,6 +33,7 @@ buffers restored exactly (checkpoints/<variant>.online.msgpack; docs/online.md).
 from __future__ import annotations
 
 import dataclasses
+import math
 from pathlib import Path
 
 from offrl_jax.algos import make_algorithm
@@ -119,8 +120,16 @@ def samples(config, env: str) -> bool:
 
 
 def online_config(args) -> OnlineConfig:
+    values = {field: getattr(args, flag) for flag, field in ONLINE_FLAGS.items()}
+    typed = set(getattr(args, "typed", ()))
+    if "online_block" not in typed and values["steps"] < values["block"]:  # fewer steps than the default block:
+        # the block shrinks to fit them (and the warm-up and evaluation interval given), evaluating at the end
+        if "online_eval_every" not in typed:
+            values["eval_every"] = values["steps"]
+        given_steps = [values["steps"], values["eval_every"], values["warmup"]]
+        values["block"] = math.gcd(*given_steps)
     try:
-        return OnlineConfig(**{field: getattr(args, flag) for flag, field in ONLINE_FLAGS.items()})
+        return OnlineConfig(**values)
     except ValueError as e:
         raise UsageError(str(e)) from None
 
@@ -196,7 +205,8 @@ def make_parser():
                    help="env steps per seed after the offline phases (default %(default)s)")
     g.add_argument("--online-block", type=positive_int, default=ONLINE_DEFAULTS["block"],
                    help="env steps collected between two scans of updates; the online steps, the warm-up and the "
-                        "online evaluation interval are multiples of it (default %(default)s)")
+                        "online evaluation interval are multiples of it (default %(default)s; fewer --online-steps "
+                        "than that: the block shrinks to fit them, and the phase is evaluated at its end)")
     g.add_argument("--utd", type=positive_int, default=ONLINE_DEFAULTS["utd"],
                    help="updates per env step (default %(default)s)")
     g.add_argument("--warmup-steps", type=int_at_least(0), default=ONLINE_DEFAULTS["warmup"],

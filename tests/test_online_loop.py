@@ -253,6 +253,17 @@ def test_an_actor_samples_or_takes_the_exploration_noise():
     assert samples(config("edac"), "hopper") and samples(config("iql", deterministic=False), "hopper")
 
 
+def test_fewer_online_steps_than_the_default_block_shrink_it_to_fit():
+    dry = run_module("experiments.finetune", "--online-steps", "400", "--dry-run")
+    assert dry.returncode == 0, dry.stderr
+    assert "400 env steps per seed after the offline phases (400 updates), blocks of 400" in dry.stdout
+    assert "evaluation every 400 env steps" in dry.stdout
+    warm = run_module("experiments.finetune", "--online-steps", "400", "--warmup-steps", "100", "--dry-run")
+    assert warm.returncode == 0 and "blocks of 100, utd 1, warm-up 100" in warm.stdout, warm.stderr
+    given = run_module("experiments.finetune", "--online-steps", "400", "--online-block", "1000", "--dry-run")
+    assert given.returncode == 2 and "must be a multiple of the block (1000" in given.stderr  # a block given stays
+
+
 def test_online_measures_by_hand():
     """Two seeds, an online phase of 1000 env steps evaluated every 100: the hand-over, the dip in the first 10 %,
     the final score, the gain and the episode-weighted training score, computed by hand."""
