@@ -61,9 +61,9 @@ def actors(run: Path, steps: list[int]) -> dict[int, tuple[Path, dict, dict]]:
 
 
 def scan(args) -> int:
+    check_writable_dir(args.out)
     env = read_run(args.run)["env"]
     found = actors(args.run, args.steps)
-    check_writable_dir(args.out)
     args.out.mkdir(parents=True, exist_ok=True)
     for step, (path, params, meta) in found.items():
         tag = f"{env}-{step}-n{args.transitions}"
