@@ -33,13 +33,17 @@ buffers restored exactly (checkpoints/<variant>.online.msgpack; docs/online.md).
 from __future__ import annotations
 
 import dataclasses
+import math
 from pathlib import Path
 
+from offrl_jax.algos import make_algorithm
 from offrl_jax.algos.config import ONLINE_FIELDS
 from offrl_jax.app.command import run_command
 from offrl_jax.app.outputs import saved_studies
 from offrl_jax.app.studies import HPARAM_DESTS, given, make_study, parser, study_variants
+from offrl_jax.envs.registry import get_env_spec
 from offrl_jax.online.config import OnlineConfig
+from offrl_jax.run.results import read_curves, short_curves
 from offrl_jax.run.study import Study, reference_label
 from offrl_jax.system.cli import UsageError, int_at_least, positive_int
 
@@ -60,7 +64,10 @@ ONLINE_FLAGS = {"online_steps": "steps", "online_block": "block", "utd": "utd", 
 
 def build(args) -> Study:
     if args.from_run is not None:
-        return from_run(args, online_config(args))
+        return check_online_flags(from_run(args, online_config(args)), given(args))
+    if args.variant is not None:
+        raise UsageError("--variant chooses among the variants of a finished run given with --from; without it "
+                         "the variants are --arms")
     if args.algo == "bc":
         raise UsageError("--algo bc: behaviour cloning has no offline-RL phase and no critic to fine-tune online "
                          "(the pretrain-only arm is imitation, then improvement online)")
@@ -77,13 +84,52 @@ def build(args) -> Study:
     whole = {"pretrain_updates": args.updates}  # pretrain-only's, whatever --pretrain-updates gives the others
     variants = tuple(v for arm in args.arms for v in study_variants(
         arm, args.algo, own[arm], args, fixed=whole if arm == "pretrain-only" else None))
-    return make_study(args.env, args.algo, args.level, args, extra={"online": online}, variants=variants,
-                      reference="scratch" if "scratch" in args.arms else None)
+    return check_online_flags(make_study(args.env, args.algo, args.level, args, extra={"online": online},
+                                         variants=variants, reference="scratch" if "scratch" in args.arms else None),
+                              given(args))
+
+
+def check_online_flags(study: Study, values: dict) -> Study:
+    """`study`, unless an online flag given (`values`) does nothing for one of its variants: --online-mix where the
+    replay does not mix (online-only, append), --explore-noise where the actor explores with a sample."""
+    for v in study.variants:
+        config = study.config(v.label)
+        if "online_mix" in values and config.replay != "mix":
+            raise UsageError(f"--online-mix: {v.label} draws its minibatches with replay {config.replay}, which "
+                             "does not mix (the mix is the online share of each minibatch with --replay mix)")
+        if "explore_noise" in values and samples(config, study.env):
+            raise UsageError(f"--explore-noise: {v.label}'s actor is stochastic and explores with a sample of its "
+                             "policy; the noise is added only to a deterministic actor's action")
+    return study
+
+
+def samples(config, env: str) -> bool:
+    """Whether a variant's actor explores with a sample (its family's `explore` gives an action), traced abstractly:
+    nothing is computed."""
+    import jax
+    import jax.numpy as jnp
+
+    spec = get_env_spec(env)
+    algo = make_algorithm(config, spec.obs_dim, spec.act_dim, 1)
+    explore = getattr(algo, "explore", None)
+    if explore is None:
+        return False
+    state = jax.eval_shape(algo.init, jax.random.PRNGKey(0))
+    obs = jax.ShapeDtypeStruct((spec.obs_dim,), jnp.float32)
+    return jax.eval_shape(explore, state, obs, jax.random.PRNGKey(0)) is not None
 
 
 def online_config(args) -> OnlineConfig:
+    values = {field: getattr(args, flag) for flag, field in ONLINE_FLAGS.items()}
+    typed = set(getattr(args, "typed", ()))
+    if "online_block" not in typed and values["steps"] < values["block"]:  # fewer steps than the default block:
+        # the block shrinks to fit them (and the warm-up and evaluation interval given), evaluating at the end
+        if "online_eval_every" not in typed:
+            values["eval_every"] = values["steps"]
+        given_steps = [values["steps"], values["eval_every"], values["warmup"]]
+        values["block"] = math.gcd(*given_steps)
     try:
-        return OnlineConfig(**{field: getattr(args, flag) for flag, field in ONLINE_FLAGS.items()})
+        return OnlineConfig(**values)
     except ValueError as e:
         raise UsageError(str(e)) from None
 
@@ -95,10 +141,20 @@ def from_run(args, online: OnlineConfig) -> Study:
     """The online phase of a finished offline run: its study (variants, seeds, data, budget) with `online`, the
     online fields given, and `start_from` its directory, whose checkpoints the runner starts from."""
     run = args.from_run
+    if args.variant is not None and len(set(args.variant)) != len(args.variant):
+        raise UsageError(f"--variant {' '.join(args.variant)}: a variant is named twice (each is fine-tuned once)")
     typed = set(getattr(args, "typed", ())) - FROM_FLAGS - set(ONLINE_FLAGS) - ONLINE_FIELDS
     if typed:
         names = ", ".join(sorted("--" + t.replace("_", "-") for t in typed))
         raise UsageError(f"--from keeps {run}'s settings, so {names} cannot be given with it (online flags can)")
+    if not (run / "config.json").is_file():
+        what = "does not exist" if not run.exists() else "is not a directory" if not run.is_dir() else \
+            "holds no config.json"
+        raise UsageError(f"--from {run}: it {what}; --from takes the directory of a finished offline run (e.g. "
+                         "runs/mujoco_medium/RUN)")
+    if args.out is not None and Path(args.out).resolve() == run.resolve():
+        raise UsageError(f"--out {args.out} is the run given with --from: fine-tuning writes a new run and keeps "
+                         "that one; give another --out")
     saved = saved_studies(run)
     if isinstance(saved, list):
         raise UsageError(f"--from {run}: it holds several studies; give one of its sub-directories")
@@ -113,6 +169,7 @@ def from_run(args, online: OnlineConfig) -> Study:
         if chosen and len(chosen) < len(group):
             raise UsageError(f"--variant: {', '.join(v.label for v in group)} were trained as one program (one "
                              "checkpoint); give all of them")
+    unfinished(run, saved, labels)
     values = {k: v for k, v in given(args).items() if k in ONLINE_FIELDS}
     variants = tuple(dataclasses.replace(v, overrides=tuple(sorted((dict(v.overrides) | values).items())),
                                          flags=tuple(v.flags or ()) + tuple(values))
@@ -120,6 +177,21 @@ def from_run(args, online: OnlineConfig) -> Study:
     reference = saved.reference if any(reference_label(saved, v.label) in labels for v in variants) else None
     return dataclasses.replace(saved, variants=variants, online=online, reference=reference,
                                start_from=str(run.resolve()))
+
+
+def unfinished(run: Path, saved: Study, labels: list[str]) -> None:
+    """Refuse (before anything is written) a --from run whose chosen variants' curves end before their offline
+    budget: it was stopped, and starts no online phase until it is finished (the runner checks its checkpoints)."""
+    try:
+        rows = read_curves(run / "curves.csv") if (run / "curves.csv").is_file() else []
+    except (OSError, ValueError) as e:
+        raise UsageError(f"--from {run}: {e}") from None
+    short = short_curves(rows, {label: saved.config(label).budget(saved.updates) for label in labels})
+    if short:
+        label, update = next(iter(short.items()))
+        at = "has no evaluation yet" if update is None else f"stopped at update {update:,}"
+        raise UsageError(f"--from {run}: {label} {at} of {saved.config(label).budget(saved.updates):,}, so its "
+                         f"offline phases are not finished: finish them first (--resume {run})")
 
 
 def make_parser():
@@ -133,7 +205,8 @@ def make_parser():
                    help="env steps per seed after the offline phases (default %(default)s)")
     g.add_argument("--online-block", type=positive_int, default=ONLINE_DEFAULTS["block"],
                    help="env steps collected between two scans of updates; the online steps, the warm-up and the "
-                        "online evaluation interval are multiples of it (default %(default)s)")
+                        "online evaluation interval are multiples of it (default %(default)s; fewer --online-steps "
+                        "than that: the block shrinks to fit them, and the phase is evaluated at its end)")
     g.add_argument("--utd", type=positive_int, default=ONLINE_DEFAULTS["utd"],
                    help="updates per env step (default %(default)s)")
     g.add_argument("--warmup-steps", type=int_at_least(0), default=ONLINE_DEFAULTS["warmup"],

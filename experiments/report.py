@@ -207,6 +207,20 @@ def recorded_behaviour(run: Path, dataset: str) -> float | None:
     return None if sha is None else behaviour_score(dataset, sha)
 
 
+def fine_tuned(study_dirs: list[Path]) -> list[str | None]:
+    """Per study, the run directory it fine-tuned with `--from` (config.json's `start_from`; named as given when it
+    is one of `study_dirs`), or None."""
+    given = {str(d.resolve()): str(d) for d in study_dirs}
+    starts = []
+    for d in study_dirs:
+        try:
+            start = json.loads((d / "config.json").read_text()).get("start_from")
+        except (OSError, ValueError, AttributeError):
+            start = None
+        starts.append(None if start is None else given.get(start, start))
+    return starts
+
+
 def curve_table(curves: Path) -> str:
     """Seed-mean score per variant (rows) at every evaluation (columns) of a curves.csv."""
     scores: dict[str, dict[int, list[float]]] = defaultdict(lambda: defaultdict(list))
@@ -312,7 +326,7 @@ def main(argv=None) -> int:
                 print(curve_table(path.parent / "curves.csv") + "\n")
             study_dirs.append(path.parent)
             found.append(summary)
-        why = not_poolable(found, [str(d) for d in study_dirs]) if len(found) > 1 else None
+        why = not_poolable(found, [str(d) for d in study_dirs], fine_tuned(study_dirs)) if len(found) > 1 else None
         if len(found) > 1:
             print(claims_table(found, [str(d) for d in study_dirs]) + "\n")
         if any(s.get("vs_reference") for summary in found for s in summary):  # the paper's measure, one row each

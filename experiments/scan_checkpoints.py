@@ -17,7 +17,7 @@ from experiments import fidelity
 from offrl_jax.data.generate import summarize, write_minari
 from offrl_jax.data.generate.collect import collect, load_policy
 from offrl_jax.data.generate.ship import read_run
-from offrl_jax.system.cli import OneLineParser, UsageError, check_writable_dir, positive_int
+from offrl_jax.system.cli import OneLineParser, UsageError, check_writable_dir, positive_int, print_error
 
 
 def make_parser() -> OneLineParser:
@@ -35,18 +35,40 @@ def make_parser() -> OneLineParser:
 
 def main(argv=None) -> int:
     args = make_parser().parse_args(argv)
-    env = read_run(args.run)["env"]
-    paths = {s: args.run / "checkpoints" / f"actor_{s:07d}.msgpack" for s in args.steps}
+    try:
+        return scan(args)
+    except (OSError, ValueError) as e:  # a run, checkpoint or --out that is not what it should be: one line
+        print_error(e)
+        return 2
+
+
+def actors(run: Path, steps: list[int]) -> dict[int, tuple[Path, dict, dict]]:
+    """{step: (path, params, meta)} of the run's actor checkpoints at `steps`, every one read before anything is
+    written; one line (UsageError) for a step given twice, missing or unreadable."""
+    if len(set(steps)) != len(steps):
+        raise UsageError(f"--steps {' '.join(map(str, steps))}: a step is given twice")
+    paths = {s: run / "checkpoints" / f"actor_{s:07d}.msgpack" for s in steps}
     missing = [str(s) for s, path in paths.items() if not path.is_file()]
     if missing:
-        raise UsageError(f"{args.run}: no checkpoint at step {', '.join(missing)}")
-    check_writable_dir(args.out)
-    args.out.mkdir(parents=True, exist_ok=True)
+        raise UsageError(f"{run}: no checkpoint at step {', '.join(missing)}")
+    found = {}
     for step, path in paths.items():
+        try:
+            found[step] = (path, *load_policy(path))
+        except Exception as e:  # noqa: BLE001 -- whatever a foreign or cut file raises, one line
+            raise UsageError(f"{path}: not an actor checkpoint of a SAC run ({type(e).__name__})") from None
+    return found
+
+
+def scan(args) -> int:
+    check_writable_dir(args.out)
+    env = read_run(args.run)["env"]
+    found = actors(args.run, args.steps)
+    args.out.mkdir(parents=True, exist_ok=True)
+    for step, (path, params, meta) in found.items():
         tag = f"{env}-{step}-n{args.transitions}"
         data = args.out / f"{tag}-data"
         if not data.exists():
-            params, meta = load_policy(path)
             ds = collect(env, params, args.transitions, 0, stochastic=True, hidden=tuple(meta["hidden"]),
                          name=f"{env}-medium")
             write_minari(ds, data, {"name": f"{env}-medium", "env": env, "checkpoint": str(path),

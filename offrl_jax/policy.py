@@ -145,8 +145,14 @@ def load_policy(run_dir: str | Path, variant: str | None = None, seed: int | Non
     group = next(g for g, _ in groups if variant in [v.label for v in g])
     path = checkpoint_path(run_dir, group if checkpoint != "best" else tuple(v for v in group if v.label == variant),
                            checkpoint)
+    handover = checkpoint_path(run_dir, group, "handover")
+    if checkpoint == "last" and not path.exists() and handover.is_file():
+        path = handover  # stopped before its first online evaluation: its last states are the hand-over's
     if path.exists() and not path.is_file():
         raise ValueError(f"{path}: not a checkpoint file (a {'directory' if path.is_dir() else 'special file'})")
+    if checkpoint == "handover" and not path.is_file() and study.online is None:
+        raise ValueError(f"{run_dir}: '{variant}' has no hand-over checkpoint: the run has no online phase (it was "
+                         "never fine-tuned); its last checkpoint is --checkpoint last")
     if not path.is_file():
         kept = kept_updates(run_dir, group)
         hint = f"; kept updates: {', '.join(map(str, kept))}" if kept and isinstance(checkpoint, int) else ""

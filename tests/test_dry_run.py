@@ -88,6 +88,14 @@ def test_dry_run_prints_what_the_run_records_and_writes_nothing(module, datasets
     assert shown == recorded(tmp_path / "run")
 
 
+@pytest.mark.parametrize("path, fragment", [("missing.hdf5", "missing.hdf5: no such file, directory or Minari"),
+                                             ("nothing", "nothing")])
+def test_dry_run_refuses_data_that_is_not_there(tmp_path, path, fragment):
+    dry = run_module("experiments.mujoco_medium", "--dry-run", "--dataset-path", tmp_path / path)
+    assert dry.returncode == 2 and fragment in dry.stderr and len(dry.stderr.strip().splitlines()) == 1, dry.stderr
+    assert dry.stdout == ""
+
+
 def test_dry_run_sources_name_each_layer():
     dry = run_module("experiments.mujoco_medium", "--dry-run", "--lam", "0.5")
     assert dry.returncode == 0, dry.stderr

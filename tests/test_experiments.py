@@ -367,6 +367,7 @@ def test_a_config_replay_is_exact_or_refused(tmp_path, tiny_hdf5):
     assert result.returncode == 2 and not (tmp_path / "new").exists(), result.stderr
     assert "not the data the saved run trained on (SHA-256" in result.stderr.strip().splitlines()[-1], result.stderr
     assert f"say so with --dataset-path {tiny_hdf5}" in result.stderr
+    assert "recorded ababababab" in result.stderr and "generated again, on another machine" in result.stderr
 
 
 def test_a_resume_keeps_the_runs_parallel(tmp_path, tiny_hdf5):

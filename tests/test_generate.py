@@ -287,3 +287,19 @@ def test_generate_into_a_relative_directory(tmp_path, monkeypatch):
     out = generate("hopper-medium", transitions=1000, out_dir="hm", progress=False, num_envs=2)
     assert out.resolve() == (tmp_path / "hm").resolve() and (tmp_path / "hm" / "offrl_jax.json").is_file()
     assert not list(tmp_path.glob(".minari-tmp-*"))
+
+
+def test_the_first_n_rows_of_a_generated_dataset_are_what_generating_n_gives(monkeypatch):
+    """--max-transitions N before the dataset is cached generates N transitions (the cut episode a time-out); after,
+    it reads the cached dataset's first N rows: the same data, so a run's recorded SHA-256 holds either way."""
+    from offrl_jax.data import catalogue
+    from offrl_jax.data.generate import build
+    from offrl_jax.run.provenance import fingerprint
+
+    made, _ = build("hopper-medium", transitions=1500, progress=False)
+    full, _ = build("hopper-medium", transitions=3000, progress=False)  # the cache's stand-in
+    assert made.timeouts[-1] == 1 and full.timeouts[1499] == 0  # the cut is a time-out only where it was made
+    monkeypatch.setattr(catalogue, "_load_generated", lambda *args: full)
+    read = catalogue.load("hopper-medium", max_transitions=1500)
+    assert fingerprint(read) == fingerprint(made)
+    assert full.timeouts[1499] == 0  # the full dataset is left as it is

@@ -214,6 +214,26 @@ def test_ship_refuses_bad_input_before_evaluating(sac_run, tmp_path, capsys, mon
     assert tree(tmp_path) == before and tree(sac_run) == run_before
 
 
+@pytest.mark.parametrize("args, message", [
+    (["--run", "{tmp}/none", "--steps", "10"], "none/run.json: no such file (--run takes a SAC run directory)"),
+    (["--run", "{tmp}/badrun", "--steps", "10"], "badrun/run.json: not the run.json of a SAC run"),
+    (["--run", "{tmp}/notjson", "--steps", "10"], "notjson/run.json: not the run.json of a SAC run"),
+    (["--run", "{run}", "--steps", "10", "10"], "--steps 10 10: a step is given twice"),
+    (["--run", "{run}", "--steps", "1e1", "20"], "actor_0000020.msgpack: not an actor checkpoint"),  # 1e1 is 10
+    (["--run", "{run}", "--steps", "ten"], "--steps: expected a positive integer"),
+    (["--run", "{run}", "--steps", "10", "--out", "/proc/scan"], "/proc/scan: not writable"),
+])
+def test_scan_checkpoints_refuses_bad_input_in_one_line_writing_nothing(sac_run, tmp_path, args, message):
+    variant(sac_run, tmp_path / "badrun", run_json={"env": "hopper"})
+    variant(sac_run, tmp_path / "notjson").joinpath("run.json").write_text("{")
+    before, run_before = tree(tmp_path), tree(sac_run)
+    out = [] if "--out" in args else ["--out", str(tmp_path / "scan")]
+    result = run_module("experiments.scan_checkpoints", *[a.format(tmp=tmp_path, run=sac_run) for a in args], *out)
+    assert result.returncode == 2 and message in result.stderr, result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1, result.stderr
+    assert tree(tmp_path) == before and tree(sac_run) == run_before  # --out is not created
+
+
 def test_ship_command_names_the_missing_file_in_one_line(sac_run, tmp_path):
     assert "none/run.json: no such file" in command("offrl_jax.data.generate.ship", "--run", tmp_path / "none",
                                                     "--level", "medium")

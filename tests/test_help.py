@@ -129,3 +129,17 @@ def test_a_family_reusing_a_field_name_with_another_type_is_refused():
     parser = argparse.ArgumentParser()
     flags.add_config_flags(parser, configs=(TD3BCConfig, SACNConfig, SameConfig))
     assert parser.parse_args(["--alpha", "0.5"]).alpha == [0.5]  # a sweepable field: a list of values
+
+
+def test_the_readme_names_the_experiments_without_dry_run(monkeypatch):
+    """README: every study that trains takes --dry-run, and it names those that take none; each module of its
+    experiments table is one or the other, as its --help says."""
+    readme = (ROOT / "README.md").read_text()
+    table = re.findall(r"^\| `(\w+)` \|", readme.split("## Experiments", 1)[1].split("\n## ", 1)[0], re.MULTILINE)
+    sentence = re.search(r"every study that\s+trains takes it; ([^)]*) train nothing and take none", readme)
+    assert table and sentence, "README's experiments section no longer says which take --dry-run"
+    without = set(re.findall(r"`(\w+)`", sentence[1]))
+    assert without < set(table)
+    for name in table:
+        options = {o for a in command_parser(f"experiments.{name}", monkeypatch)._actions for o in a.option_strings}
+        assert ("--dry-run" in options) == (name not in without), name

@@ -2,6 +2,7 @@
 driver's member axis, and `experiments.finetune` end to end (run, resume inside the online phase, refusals)."""
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -222,12 +223,45 @@ def test_a_run_killed_inside_the_online_phase_goes_on_from_its_last_checkpoint_e
     (["--replay", "sometimes"], "invalid choice"),
     (["--algo", "iql", "--arms", "online-rl"], "no form without its behaviour terms"),
     (["--buffer-capacity", "500"], "give a capacity of at least 1999"),  # before the offline phases, not after
+    # a flag that would do nothing: the mix where the replay does not mix, noise where the actor samples
+    (["--replay", "online-only", "--online-mix", "0.3"], "replay online-only, which does not mix"),
+    (["--replay", "append", "--online-mix", "0.3"], "replay append, which does not mix"),
+    (["--algo", "iql", "--online-mix", "0.2"], "replay append, which does not mix"),  # IQL's own replay
+    (["--algo", "edac", "--explore-noise", "0.3"], "actor is stochastic"),
+    (["--algo", "iql", "--no-deterministic", "--explore-noise", "0.3"], "actor is stochastic"),
+    (["--variant", "pretrained"], "--variant chooses among the variants of a finished run given with --from"),
+    (["--from", "somewhere", "--variant", "pretrained", "pretrained"], "a variant is named twice"),
+    # what the int32 update counter cannot count: the online updates, and with the offline ones
+    (["--online-steps", "400", "--online-block", "200", "--utd", "10000000"], "past what the update counter holds"),
+    (["--online-steps", "400", "--online-block", "200", "--utd", "5368700"], "its offline and online updates"),
 ])
 def test_finetune_refuses_bad_online_settings_in_one_line(tmp_path, args, fragment):
     result = run_module("experiments.finetune", *args, "--out", tmp_path / "x")
     assert result.returncode == 2
     assert fragment in result.stderr and len(result.stderr.strip().splitlines()) == 1, result.stderr
     assert not (tmp_path / "x").exists()
+
+
+def test_an_actor_samples_or_takes_the_exploration_noise():
+    from experiments.finetune import samples
+
+    def config(algo, **kw):
+        return make_config(algo, "hopper", hidden=(8, 8), **kw)
+
+    assert not samples(config("td3bc"), "hopper") and not samples(config("rebrac"), "hopper")
+    assert not samples(config("iql", deterministic=True), "hopper")  # noise: its action is deterministic
+    assert samples(config("edac"), "hopper") and samples(config("iql", deterministic=False), "hopper")
+
+
+def test_fewer_online_steps_than_the_default_block_shrink_it_to_fit():
+    dry = run_module("experiments.finetune", "--online-steps", "400", "--dry-run")
+    assert dry.returncode == 0, dry.stderr
+    assert "400 env steps per seed after the offline phases (400 updates), blocks of 400" in dry.stdout
+    assert "evaluation every 400 env steps" in dry.stdout
+    warm = run_module("experiments.finetune", "--online-steps", "400", "--warmup-steps", "100", "--dry-run")
+    assert warm.returncode == 0 and "blocks of 100, utd 1, warm-up 100" in warm.stdout, warm.stderr
+    given = run_module("experiments.finetune", "--online-steps", "400", "--online-block", "1000", "--dry-run")
+    assert given.returncode == 2 and "must be a multiple of the block (1000" in given.stderr  # a block given stays
 
 
 def test_online_measures_by_hand():
@@ -285,6 +319,22 @@ def test_warm_up_evaluations_keep_the_hand_over_on_the_update_axis():
     assert _best_scores(rows[:2]) == {"a": 40.0} and _best_scores(rows) == {"a": 60.0}  # not the two averaged
 
 
+def test_warm_up_evaluations_are_read_back_beside_the_hand_over_row(tmp_path):
+    """A warm-up that reaches the first online evaluations writes rows at the hand-over's update, each at its env
+    step: curves.csv reads them back (report and --resume), and a row repeated at the same env step is refused."""
+    from offrl_jax.run.results import write_curves
+
+    rows = [{"variant": "a", "algo": "td3bc", "seed": s, "phase": "offline_rl", "update": 300, "seconds": 1.0,
+             "score": 40.0} for s in (0, 1)]
+    rows += [{"variant": "a", "algo": "td3bc", "seed": s, "phase": "online", "update": 300, "seconds": 2.0,
+              "score": 10.0, "env_steps": step} for step in (200, 400) for s in (0, 1)]
+    write_curves(tmp_path / "curves.csv", rows)
+    assert len(read_curves(tmp_path / "curves.csv")) == 6
+    write_curves(tmp_path / "curves.csv", rows + rows[-1:])
+    with pytest.raises(ValueError, match="seed 1 has two rows at update 300 \\(env step 400\\)"):
+        read_curves(tmp_path / "curves.csv")
+
+
 def test_finetune_from_a_finished_offline_run_starts_at_its_checkpoint(tmp_path):
     offline = tmp_path / "offline"
     argv = ["--env", "hopper", "--updates", "400", "--eval-every", "200", "--seeds", "2", "--max-transitions",
@@ -318,6 +368,49 @@ def test_finetune_from_a_finished_offline_run_starts_at_its_checkpoint(tmp_path)
     assert resumed.returncode == 0 and "starts again from the hand-over" in resumed.stderr, resumed.stderr
     no_time = lambda rows: [{k: v for k, v in r.items() if k != "seconds"} for r in rows]  # noqa: E731
     assert no_time(read_curves(out / "curves.csv")) == no_time(after)
+    # as if killed after its hand-over was saved and before its first online evaluation: no last checkpoint yet,
+    # curves.csv has the offline rows; the policy acts from the hand-over, and --resume goes on from there
+    from offrl_jax.run.results import write_curves
+
+    (out / "checkpoints" / "pretrained.msgpack").unlink()
+    (out / "summary.json").unlink()
+    shutil.rmtree(out / "online")
+    write_curves(out / "curves.csv", [r for r in after if r["phase"] != "online"])
+    assert load_policy(out, "pretrained").update == 400
+    resumed = run_module("experiments.finetune", "--resume", out, "--no-progress", "--parallel", "1")
+    assert resumed.returncode == 0, resumed.stderr
+    assert no_time(read_curves(out / "curves.csv")) == no_time(after)
+    refused = run_module("offrl_jax.rollout", offline, "--checkpoint", "handover")  # never fine-tuned
+    assert refused.returncode == 2 and "no online phase (it was never fine-tuned)" in refused.stderr, refused.stderr
+
+
+def test_finetune_from_refuses_what_is_not_a_finished_run_before_writing(tmp_path):
+    """--from a missing directory, a file, an empty directory, a run stopped before the end of its offline phases,
+    or --out the run itself: one line saying what --from wants, and no --out created."""
+    from experiments.mujoco_medium import build, make_parser
+    from offrl_jax.run.results import write_curves
+
+    (tmp_path / "file").write_text("x")
+    (tmp_path / "empty").mkdir()
+    stopped = tmp_path / "stopped"
+    stopped.mkdir()
+    study = build(make_parser().parse_args(["--updates", "400", "--eval-every", "200", "--seeds", "2",
+                                            "--pretrain-updates", "200", "--hidden", "16", "16"]))
+    (stopped / "config.json").write_text(study.to_json())
+    write_curves(stopped / "curves.csv", [{"variant": v, "algo": "td3bc", "seed": s, "phase": "offline_rl",
+                                           "update": 200, "seconds": 1.0, "score": 10.0}
+                                          for v in ("pretrained", "scratch") for s in (0, 1)])
+    out = tmp_path / "out"
+    for source, fragment in ((tmp_path / "missing", "it does not exist; --from takes the directory of a finished"),
+                             (tmp_path / "file", "it is not a directory"),
+                             (tmp_path / "empty", "it holds no config.json"),
+                             (stopped, "pretrained stopped at update 200 of 400, so its offline phases are not "
+                                       f"finished: finish them first (--resume {stopped})")):
+        refused = run_module("experiments.finetune", "--from", source, "--out", out)
+        assert refused.returncode == 2 and fragment in refused.stderr, refused.stderr
+        assert len(refused.stderr.strip().splitlines()) == 1 and not out.exists()
+    refused = run_module("experiments.finetune", "--from", stopped, "--out", stopped, "--overwrite")
+    assert refused.returncode == 2 and "is the run given with --from" in refused.stderr, refused.stderr
 
 
 def test_the_online_rl_arm_has_no_offline_phase_and_no_behaviour_term(tmp_path):

@@ -53,9 +53,14 @@ def test_an_edited_config_is_refused_naming_what_differs_and_nothing_changes(hal
     assert digest(run) == before
 
 
-@pytest.mark.parametrize("change, named", [({"seeds": (0, 2)}, "seeds"), ({"batch_size": 16}, "batch size"),
-                                           ("data", "dataset"), ({"eval_episodes": 3}, "evaluation"),
-                                           ({"eval_every": 50}, "evaluation")])
+@pytest.mark.parametrize("change, named", [
+    ({"seeds": (0, 2)}, r"made by another run \(seeds"), ({"batch_size": 16}, r"made by another run \(batch size"),
+    # other data: both fingerprints, why data may differ, and what to do
+    ("data", r"trained on data with SHA-256 [0-9a-f]{12}\.\.\., and the data here has [0-9a-f]{12}\.\.\. \(a "
+             r"dataset generated again, on another machine .*put back the data it trained on, or train again on "
+             r"this data with --config .*config.json --dataset-path synthetic; nothing was changed"),
+    ({"eval_episodes": 3}, r"made by another run \(evaluation"),
+    ({"eval_every": 50}, r"made by another run \(evaluation")])
 def test_a_checkpoint_of_another_run_is_refused_and_nothing_changes(half_run, tmp_path, change, named):
     run = resumed_copy(half_run, tmp_path)
     before = digest(run)
@@ -64,9 +69,21 @@ def test_a_checkpoint_of_another_run_is_refused_and_nothing_changes(half_run, tm
         data = synthetic_dataset(seed=1)
     else:
         study = dataclasses.replace(study, **change)
-    with pytest.raises(ResumeMismatch, match=f"made by another run \\({named}"):
+    with pytest.raises(ResumeMismatch, match=named):
         run_study(study, run, data, resume=True, progress=False)
     assert digest(run) == before
+
+
+def test_fine_tuning_a_run_on_other_data_names_both_fingerprints_and_the_way_on(half_run):
+    from offrl_jax.run.provenance import fingerprint
+    from offrl_jax.run.resume import start_from
+
+    study = dataclasses.replace(tiny_study(updates=100), start_from=str(half_run))
+    group = study.groups()[0][0]
+    with pytest.raises(ValueError, match=r"trained on data with SHA-256 .* not bit-identical\); --from goes on with "
+                                         r"the data the run trained on: put it back, or train that run again on this "
+                                         r"data \(--config .*config.json --dataset-path synthetic\)"):
+        start_from(study, group, fingerprint(synthetic_dataset(seed=1)), None, 100)
 
 
 def test_an_old_checkpoint_without_fingerprint_is_checked_by_its_shapes(half_run, tmp_path):

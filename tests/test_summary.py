@@ -1,5 +1,7 @@
 """summary.json's numbers from hand-made curves: per-seed final, last and mean scores, the asymptote and its trend,
 every seed's updates and seconds to each threshold, the speed-up and the verdict."""
+import json
+
 import pytest
 
 from offrl_jax.run.study import Study, Variant
@@ -366,3 +368,21 @@ def test_arms_of_other_algorithms_or_the_same_runs_are_not_pooled_across_studies
     assert not_poolable([a, study("edac", [3.0, 4.0])], ["a", "e"]) == "'scratch' is edac, td3bc in different studies"
     merged = study("td3bc", [1.0, 2.0])  # a's runs again
     assert not_poolable([a, b, merged], ["a", "b", "m"]) == "a and m hold the same runs of 'scratch'"
+    tuned = [dict(a[0], final_scores=[5.0, 6.0], online={"final": {}})]  # the same arm, fine-tuned online
+    assert not_poolable([a, tuned], ["a", "t"]).startswith("'scratch' is fine-tuned online in t and not in a")
+    # a --from run beside the run it started from, or two fine-tunings of one run: the same seeds' offline phases
+    assert not_poolable([tuned, tuned], ["t", "a"], ["a", None]) == \
+        "t fine-tunes the runs of a (the same seeds' offline phases)"
+    assert not_poolable([tuned, tuned], ["t", "u"], ["/runs/x", "/runs/x"]) == \
+        "t and u both fine-tune the runs of /runs/x (the same seeds' offline phases)"
+
+
+def test_report_names_the_run_a_study_fine_tuned_as_it_was_given(tmp_path):
+    from experiments.report import fine_tuned
+
+    source, tuned, plain = tmp_path / "mm", tmp_path / "ft", tmp_path / "plain"
+    for d in (source, tuned, plain):
+        d.mkdir()
+    (tuned / "config.json").write_text(json.dumps({"start_from": str(source.resolve())}))
+    (plain / "config.json").write_text(json.dumps({"start_from": None}))
+    assert fine_tuned([source, tuned, plain]) == [None, str(source), None]

@@ -295,8 +295,10 @@ class Command:
         for study, sha in zip(self.studies, shas):
             if self.saved_data.get(study.name, sha) != sha:
                 raise UsageError(f"{study.dataset}: not the data the saved run trained on (SHA-256 {sha[:12]}..., "
-                                 f"recorded {self.saved_data[study.name][:12]}...); --config re-runs a run exactly: "
-                                 f"to train on the data as it is now, say so with --dataset-path {study.dataset}")
+                                 f"recorded {self.saved_data[study.name][:12]}...: a dataset generated again, on "
+                                 "another machine or by another version of the code, is not bit-identical); "
+                                 "--config re-runs a run exactly: to train on the data as it is now, say so with "
+                                 f"--dataset-path {study.dataset}")
 
     # 6. run
     def run(self, data: list, shas: list[str]) -> None:
@@ -406,6 +408,8 @@ def run_command(build: Build, parser: argparse.ArgumentParser, argv=None,
     try:
         command.read(build, hparams, hparam_dests)
         if getattr(command.args, "dry_run", False):
+            for study in command.studies:  # the data it names is there (a run would refuse it at once)
+                catalogue.check_there(study.dataset)
             print(describe(command.studies))
             ok = True
             return 0

@@ -149,6 +149,20 @@ def _load_generated(name: str, max_transitions, clip_actions, generate_if_missin
     return dataclasses.replace(ds, name=name)
 
 
+def check_there(name_or_path) -> None:
+    """Raise DatasetError (what `load` would) unless `name_or_path` is a known dataset, an existing file or folder,
+    or a Minari id in `minari_root()`; nothing is read (`--dry-run`'s check of the data it names)."""
+    name = str(name_or_path)
+    if name in SHARED_NAMES or name in KNOWN or split_version(name)[0] in KNOWN or Path(name).exists():
+        return
+    if (minari_root() / name).is_dir():
+        return
+    looks_like_path = Path(name).suffix.lower() in FILE_SUFFIXES or "/" in name
+    if not looks_like_path:
+        raise _unknown(name)
+    raise DatasetError(f"{name}: no such file, directory or Minari dataset id (looked in {minari_root()})")
+
+
 def load(name_or_path, *, max_transitions: int | None = None, clip_actions: bool | None = None,
          generate_if_missing: bool = True, env: str | None = None) -> Dataset:
     """A validated `Dataset` from a known name (see `KNOWN`) or a path / Minari id (see `load_dataset_path`).
@@ -179,7 +193,11 @@ def load(name_or_path, *, max_transitions: int | None = None, clip_actions: bool
         if not looks_like_path:
             raise _unknown(name)
         ds = load_dataset_path(name, env=env, clip_actions=clip_actions)
-    return ds if max_transitions is None or len(ds) <= max_transitions else ds.select(slice(0, max_transitions))
+    if max_transitions is None or len(ds) <= max_transitions:
+        return ds
+    # a generated dataset's first N rows are what generating N transitions gives (its cut episode a time-out), so a
+    # run on them reads the same data before and after the full dataset is cached; other data is cut as it is
+    return ds.first(max_transitions) if name in KNOWN else ds.select(slice(0, max_transitions))
 
 
 def summary(ds: Dataset) -> dict:

@@ -86,6 +86,16 @@ class Dataset:
         arrays = {f: getattr(self, f)[rows] for f in ARRAY_FIELDS}
         return dataclasses.replace(self, **arrays)
 
+    def first(self, n: int) -> Dataset:
+        """The first `n` rows, an episode they cut off ending in a time-out (not a terminal): the rows a generator
+        asked for `n` transitions writes, so either way of getting them gives the same data."""
+        head = self.select(slice(0, n))
+        if n < len(self) and not head.terminals[-1]:
+            timeouts = head.timeouts.copy()  # a slice is a view: the full dataset stays as it is
+            timeouts[-1] = 1
+            head = dataclasses.replace(head, timeouts=timeouts)
+        return head
+
 
 def rows_without_timeouts(timeouts) -> np.ndarray:
     """(K,) indices of the rows that are not time-outs: the only rows sampled when time-out rows are dropped

@@ -33,6 +33,10 @@ class OnlineConfig:
         if self.warmup >= self.steps:
             raise ValueError(f"the online warm-up ({self.warmup} env steps) leaves no step of the {self.steps} to "
                              "update in")
+        if self.updates() >= 2**31:
+            raise ValueError(f"online utd {self.utd} x {self.steps - self.warmup:,} env steps after the warm-up make "
+                             f"{self.updates():,} updates, past what the update counter holds (an int32: "
+                             f"{2**31 - 1:,})")
 
     def updates(self) -> int:
         """Online updates of every member: utd for each env step after the warm-up."""

@@ -22,14 +22,29 @@ def arms(summaries: list[list[dict]]) -> list[str]:
     return [s["variant"] for s in summaries[0] if s["variant"] in common]
 
 
-def not_poolable(summaries: list[list[dict]], names: list[str]) -> str | None:
+def not_poolable(summaries: list[list[dict]], names: list[str], starts: list[str | None] | None = None
+                 ) -> str | None:
     """Why the studies' common arms cannot be pooled, or None: an arm that is a different algorithm in two studies
-    (a "scratch" of TD3+BC beside one of EDAC), or the same runs in two studies (a run and a merge holding it: its
-    seeds' final scores all equal)."""
+    (a "scratch" of TD3+BC beside one of EDAC), an arm fine-tuned online in one study and not in another (its final
+    score is another measure), the same seeds' offline phases in two studies (`starts`: the run directory each
+    study fine-tuned with `--from`, resolved, or None; `names` then resolved too), or the same runs in two studies (a
+    run and a merge holding it: its seeds' final scores all equal)."""
+    for i, start in enumerate(starts or []):
+        if start is None:
+            continue
+        if start in names:
+            return f"{names[i]} fine-tunes the runs of {start} (the same seeds' offline phases)"
+        if (j := next((j for j in range(i) if (starts or [])[j] == start), None)) is not None:
+            return f"{names[j]} and {names[i]} both fine-tune the runs of {start} (the same seeds' offline phases)"
     for arm in arms(summaries):
         mine = [next(s for s in summary if s["variant"] == arm) for summary in summaries]
         if len(algos := {s.get("algo") for s in mine}) > 1:
             return f"'{arm}' is {', '.join(sorted(map(str, algos)))} in different studies"
+        online = [name for name, s in zip(names, mine) if s.get("online")]
+        if online and len(online) < len(mine):
+            offline = next(name for name, s in zip(names, mine) if not s.get("online"))
+            return (f"'{arm}' is fine-tuned online in {online[0]} and not in {offline} (its final score is after "
+                    "the online phase in one, the offline phases in the other)")
         seen: dict[tuple, str] = {}
         for name, s in zip(names, mine):
             key = tuple(s["final_scores"])

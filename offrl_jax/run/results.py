@@ -45,15 +45,17 @@ def read_curves(path: Path) -> list[dict]:
         except (ValueError, TypeError) as e:
             raise ValueError(f"{path}: not a curves.csv of this project ({e})") from None
     seeds: dict[str, set] = {}  # every evaluation holds every seed of its variant: a file cut at a line is refused
-    at: dict[tuple, set] = {}
-    for r in rows:
+    at: dict[tuple, set] = {}  # an evaluation: its update and env step (the online warm-up's share the hand-over's
+    for r in rows:  # update, each at its own env step)
         if "variant" in r and "seed" in r and "update" in r:
-            if r["seed"] in at.get((r["variant"], r["update"]), ()):
-                raise ValueError(f"{path}: {r['variant']} seed {r['seed']} has two rows at update {r['update']} "
-                                 "(rows of two runs mixed?)")
+            when = (r["variant"], r["update"], r.get("env_steps", 0))
+            if r["seed"] in at.get(when, ()):
+                step = f" (env step {r['env_steps']:.0f})" if r.get("env_steps") else ""
+                raise ValueError(f"{path}: {r['variant']} seed {r['seed']} has two rows at update {r['update']}"
+                                 f"{step} (rows of two runs mixed?)")
             seeds.setdefault(r["variant"], set()).add(r["seed"])
-            at.setdefault((r["variant"], r["update"]), set()).add(r["seed"])
-    for (variant, update), have in at.items():
+            at.setdefault(when, set()).add(r["seed"])
+    for (variant, update, _), have in at.items():
         if seeds[variant] - have:
             raise ValueError(f"{path}: {variant} at update {update} has no row for seed(s) "
                              f"{', '.join(map(str, sorted(seeds[variant] - have)))} (a truncated or edited file?)")

@@ -92,11 +92,21 @@ def group_identity(study: Study, group: tuple[Variant, ...], data_sha256: str) -
     return json.loads(json.dumps(identity, default=list))  # tuples as lists, as they come back from a file
 
 
+DATA = "dataset (SHA-256)"  # `identity_differences`' name of the data's fingerprint
+
+
+def other_data(payload: dict, data_sha256: str) -> str:
+    """What a checkpoint trained on other data than this says: both fingerprints, and why data may differ."""
+    saved = str(json.loads(payload["identity"]).get("data"))
+    return (f"trained on data with SHA-256 {saved[:12]}..., and the data here has {data_sha256[:12]}... (a dataset "
+            "generated again, on another machine or by another version of the code, is not bit-identical)")
+
+
 def identity_differences(saved: dict[str, Any], current: dict[str, Any], config_defaults: list[dict]) -> list[str]:
     """What differs between a checkpoint's identity and the study's, by name.  A config field the checkpoint does
     not know (added to the code since) is no difference while the study keeps its default."""
     names = {"variants": "variants", "seeds": "seeds", "batch_size": "batch size", "env": "env",
-             "data": "dataset (SHA-256)", "evaluation": "evaluation interval or episodes",
+             "data": DATA, "evaluation": "evaluation interval or episodes",
              "online": "online settings"}
     # (checkpoints before 2026-12-02 did not record their evaluation; an offline run's has no online settings: an
     # online phase may follow it)
@@ -186,6 +196,12 @@ def check_resume(study: Study, out_dir: Path, ds, data_sha256: str) -> None:
         path, labels = checkpoint_path(out_dir, group), {v.label for v in group}
         if path.exists() and not path.is_file():
             raise ResumeMismatch(f"{path} is not a checkpoint file; nothing was changed")
+        handover = checkpoint_path(out_dir, group, "handover")
+        if not path.is_file() and study.start_from is not None and not any(
+                r.get("env_steps") for r in rows if r.get("variant") in labels):
+            if not handover.is_file():  # stopped before its hand-over: it starts from the finished run again
+                continue
+            path = handover  # stopped before its first online evaluation: it goes on from its hand-over
         if not path.is_file():
             done = [int(r["update"]) for r in rows if r.get("variant") in labels]
             if done:
@@ -203,6 +219,11 @@ def check_resume(study: Study, out_dir: Path, ds, data_sha256: str) -> None:
                 from None
         if "identity" in payload:
             differ = checkpoint_differences(payload, study, group, data_sha256)
+            if differ == [DATA]:
+                raise ResumeMismatch(f"{path}: {other_data(payload, data_sha256)}; resuming would go on with other "
+                                     f"data: put back the data it trained on, or train again on this data with "
+                                     f"--config {out_dir / 'config.json'} --dataset-path {study.dataset}; nothing "
+                                     "was changed")
             if differ:
                 raise ResumeMismatch(f"{path}: made by another run ({'; '.join(differ[:3])}"
                                      f"{'; ...' if len(differ) > 3 else ''}); nothing was changed")
@@ -233,6 +254,10 @@ def start_from(study: Study, group: tuple[Variant, ...], data_sha256: str, templ
         raise ValueError(f"{path}: no checkpoint of {' + '.join(v.label for v in group)} to start from")
     payload = serialization.msgpack_restore(path.read_bytes())
     differ = checkpoint_differences(payload, study, group, data_sha256)
+    if differ == [DATA]:
+        raise ValueError(f"{path}: {other_data(payload, data_sha256)}; --from goes on with the data the run trained "
+                         f"on: put it back, or train that run again on this data (--config "
+                         f"{Path(study.start_from) / 'config.json'} --dataset-path {study.dataset}) and fine-tune that")
     if differ:
         raise ValueError(f"{path}: made by another run ({'; '.join(differ[:3])})")
     states, update, seconds, rows = checkpoint_contents(payload, template)

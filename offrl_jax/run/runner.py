@@ -189,7 +189,10 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
     online = study.online
     handover_path = checkpoint_path(out_dir, group, "handover")
     online_path, saved_online = checkpoint_path(out_dir, group, "online"), None
-    if study.start_from is not None and not (resume and ckpt_path.exists()):  # a finished run's offline phases
+    if study.start_from is not None and resume and not ckpt_path.exists() and handover_path.is_file():
+        states, start, seconds, rows = load_checkpoint(handover_path, driver.init())  # stopped before its first
+        record()  # online evaluation: it goes on from its hand-over (checked by `check_resume`)
+    elif study.start_from is not None and not (resume and ckpt_path.exists()):  # a finished run's offline phases
         states, start, seconds, rows = start_from(study, group, data_sha256, driver.init(), last_update)
         if writer:  # where this run's online phase starts, as a run that trained its offline phases keeps it
             save_checkpoint(handover_path, states, start, seconds, rows, meta)

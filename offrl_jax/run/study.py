@@ -150,6 +150,9 @@ class Study:
             if self.online is not None:
                 self.online.check(label, stages[-1])
                 self.online.rows(horizon)  # a buffer too small for the env's episodes: refused before any training
+                if (total := config.budget(self.updates) + self.online.updates()) >= 2**31:
+                    raise ValueError(f"variant {label!r}: its offline and online updates ({total:,}) are past what "
+                                     f"the update counter holds (an int32: {2**31 - 1:,})")
         object.__setattr__(self, "_configs", configs)  # not fields: not in to_json, equality or replace
         object.__setattr__(self, "_sources", {label: r.sources for label, r in resolved.items()})
         widest = max(len(group) for group, _ in self.groups()) * len(self.seeds)
