@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import jax
@@ -40,6 +40,25 @@ Params = Any
 Batch = dict[str, jax.Array]
 Metrics = dict[str, jax.Array]
 UpdateFn = Callable[[Any, Batch, jax.Array], tuple[Any, Metrics]]
+
+
+@dataclasses.dataclass(frozen=True)
+class Family:
+    """A family of algorithms: its config dataclass (extending `offrl_jax.algos.config.Config`) and the algorithm
+    class built from it, `algorithm(config, obs_dim, act_dim, num_transitions)` with `init`, `phases` and `act`."""
+    config: type
+    algorithm: type
+
+
+@dataclasses.dataclass(frozen=True)
+class Algo:
+    """An algorithm: a family plus the config values that make it that algorithm (td3bc_cql's cql_weight)."""
+    family: str  # a key of `offrl_jax.algos.FAMILIES`
+    values: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    # the per-env sections (`ENV_DEFAULTS`) it reads after its family's and before its own, and the values of those
+    # it skips
+    sections: tuple[str, ...] = ()
+    skip: tuple[str, ...] = ()
 
 
 @struct.dataclass

@@ -30,6 +30,11 @@ REPLAY_MODES = ("mix", "append", "online-only")  # `offrl_jax.online.sampling`
 # ignore them); a family adds its own online fields to this set
 ONLINE_FIELDS = frozenset({"replay", "online_mix", "explore_noise", "online_critic_beta", "online_actor_beta_floor"})
 PretrainMode = Literal["none", "actor", "critic", "actor+critic"]
+# The values of the `authors` preset every family shares: the authors' code (AdamJelley/EfficientOfflineRL, a CORL
+# fork) switch by switch; each family's file adds its own, and docs/fidelity.md has the table (what the paper says,
+# what their code and CORL do, our default, the flag).
+AUTHORS_CODE = {"layer_norm_affine": False, "layer_norm_eps": 1e-5, "init": "torch", "balance": "signed",
+                "timeouts": "stop"}
 
 
 @dataclasses.dataclass(frozen=True)

@@ -25,7 +25,9 @@ from flax import struct
 
 from offrl_jax import losses as L
 from offrl_jax.algos.common import (
+    Algo,
     Batch,
+    Family,
     Model,
     Phase,
     done_flags,
@@ -171,3 +173,14 @@ class IQL:
         state = state.replace(value=value, critic=polyak(critic, cfg.tau))
         state, actor_metrics = self.actor_step(state, batch, advantage, cfg.beta, "actor_loss")
         return state, metrics | critic_metrics | actor_metrics
+
+
+FAMILY = Family(IQLConfig, IQL)
+ALGOS = {"iql": Algo("iql")}
+# IQL's values per env, keyed as `offrl_jax.algos.ENV_DEFAULTS` (CORL's configs/offline/iql/<env>/medium_v2.yaml:
+# expectile 0.7, beta 3 everywhere); hopper's also scales the rewards by 1000 / (max - min episode return)
+ENV_DEFAULTS = {
+    ("iql", "hopper"): {"deterministic": True, "tau": 0.001, "normalize_reward": True},
+    ("iql", "door"): {"expectile": 0.8},  # configs/{offline,finetune}/iql/door/*_v1.yaml (no actor dropout here)
+}
+PRESETS: dict = {}

@@ -25,7 +25,9 @@ from flax import struct
 
 from offrl_jax import losses as L
 from offrl_jax.algos.common import (
+    Algo,
     Batch,
+    Family,
     Model,
     Phase,
     Stage,
@@ -175,3 +177,18 @@ class ReBRAC:
                 tau = self.cfg.tau
                 state, metrics = state.replace(actor=polyak(actor, tau), critic=polyak(state.critic, tau)), metrics | m
         return state, metrics
+
+
+FAMILY = Family(ReBRACConfig, ReBRAC)
+ALGOS = {"rebrac": Algo("rebrac")}
+# ReBRAC's published values per env, keyed as `offrl_jax.algos.ENV_DEFAULTS`
+ENV_DEFAULTS = {
+    # the medium datasets' betas (CORL's configs/offline/rebrac/<env>/medium_v2.yaml)
+    ("rebrac", "hopper"): {"actor_beta": 0.01, "critic_beta": 0.01},
+    ("rebrac", "halfcheetah"): {"actor_beta": 0.001, "critic_beta": 0.01},
+    ("rebrac", "walker2d"): {"actor_beta": 0.05, "critic_beta": 0.1},
+    # door (CORL's configs/offline/rebrac/door/<level>_v1.yaml, the same in configs/finetune/rebrac/door/cloned_v1.yaml)
+    ("rebrac", "door"): {"actor_beta": 0.01, "critic_beta": 0.1, "actor_lr": 3e-4, "critic_lr": 3e-4},
+    ("rebrac", "door:human"): {"actor_beta": 0.1},
+}
+PRESETS: dict = {}

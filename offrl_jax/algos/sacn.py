@@ -1,9 +1,12 @@
-"""The SAC-N family (`sacn`): a tanh-Gaussian actor, an ensemble of N critics and a learned temperature.
+"""The SAC-N family (`sacn`): a tanh-Gaussian actor, an ensemble of N critics and a learned temperature.  Its
+algorithms (`ALGOS`):
 
-    SAC-N    = SAC with the min over N critics
-    EDAC     = SAC-N + eta * ensemble-diversity loss on the critics
-    EDAC+BC  = EDAC with the actor loss balanced against MSE(sampled action, dataset action) (Appendix G)
-    CQL      = SAC with N = 2 + alpha_cql * CORL's importance-sampled CQL penalty (no entropy in the backup)
+    edac     EDAC: SAC-N + eta * ensemble-diversity loss on the critics (eta > 0)
+    sacn     SAC-N: SAC with the min over N critics (eta = 0)
+    edac_bc  EDAC+BC: EDAC with the actor loss balanced against MSE(sampled action, dataset action) (the paper's
+             hybrid, Appendix G)
+    cql      CQL (CORL's form): SAC with N = 2 + alpha_cql * CORL's importance-sampled CQL penalty (no entropy in the
+             backup)
 
 Pre-training (Alg. 2): soft BC with the temperature tuned (`actor`), then soft returns-to-go computed once with that
 actor and alpha, then critic regression on them with the diversity loss as regulariser (`critic`), then offline RL
@@ -21,7 +24,9 @@ from flax import struct
 
 from offrl_jax import losses as L
 from offrl_jax.algos.common import (
+    Algo,
     Batch,
+    Family,
     Model,
     Phase,
     Stage,
@@ -36,7 +41,7 @@ from offrl_jax.algos.common import (
     stage_phases,
     uniform_actions,
 )
-from offrl_jax.algos.config import Config, arch_with_bias, check_cql_fields, require
+from offrl_jax.algos.config import AUTHORS_CODE, Config, arch_with_bias, check_cql_fields, require
 from offrl_jax.data.returns import soft_returns_to_go
 from offrl_jax.nets import (
     TANH_LOG_DETS,
@@ -298,3 +303,44 @@ class SACN:
             return chain(*updates)(state, batch, key)
         (t, m_t), (a, m_a), (c, m_c) = (fn(state, batch, k) for fn, k in zip(updates, jax.random.split(key, 3)))
         return state.replace(log_alpha=t.log_alpha, actor=a.actor, critic=c.critic), m_t | m_a | m_c
+
+
+FAMILY = Family(SACNConfig, SACN)
+ALGOS = {
+    "edac": Algo("sacn"),
+    "sacn": Algo("sacn", {"eta": 0.0}, sections=("edac",), skip=("eta",)),  # EDAC's ensemble sizes
+    "edac_bc": Algo("sacn", {"bc_weight": 1.0}, sections=("edac",)),
+    # the authors' CQL configs (their CORL fork's configs/cql/door): cql_min_q_weight 10, policy_lr 3e-5, no entropy in
+    # the backup (CORL's own door/pen configs, added later: cql_alpha 1, policy_lr 1e-4)
+    "cql": Algo("sacn", {"num_critics": 2, "eta": 0.0, "cql_alpha": 10.0, "backup_entropy": False,
+                         "pretrain": "none", "actor_lr": 3e-5, "simultaneous_update": True}),
+}
+# The paper's per-env values (Section 5, Appendix G Table 3), keyed by (family or algorithm, env) as
+# `offrl_jax.algos.ENV_DEFAULTS`: Adroit's pre-training is the paper's 200k updates; EDAC's ensemble sizes and eta
+# per env, pen-cloned's eta under ("edac", "pen:cloned").
+ENV_DEFAULTS = {
+    ("sacn", "halfcheetah"): {"lam": 0.1},
+    ("sacn", "walker2d"): {"lam": 0.1},
+    ("sacn", "door"): {"pretrain_updates": 200_000},
+    ("sacn", "hammer"): {"pretrain_updates": 200_000},
+    ("sacn", "relocate"): {"pretrain_updates": 200_000},
+    ("sacn", "pen"): {"pretrain_updates": 200_000},
+    ("edac", "hopper"): {"num_critics": 50, "eta": 1.0},
+    ("edac", "halfcheetah"): {"num_critics": 10, "eta": 1.0},
+    ("edac", "walker2d"): {"num_critics": 10, "eta": 1.0},
+    ("edac", "door"): {"num_critics": 50, "eta": 200.0},
+    ("edac", "hammer"): {"num_critics": 50, "eta": 200.0},
+    ("edac", "relocate"): {"num_critics": 50, "eta": 200.0},
+    ("edac", "pen"): {"num_critics": 20, "eta": 1000.0},
+    ("edac", "pen:cloned"): {"eta": 10.0},
+}
+# "authors": the authors' code switch by switch (`AUTHORS_CODE`, docs/fidelity.md)
+PRESETS = {
+    "authors": {
+        "sacn": AUTHORS_CODE | {"hidden_bias": 0.1, "tanh_log_det": "eps", "log_alpha_bound": 10.0},
+        # CORL's cql.py as the authors ran it: orthogonal init of every layer, log-std offset -1 within [-20, 2],
+        # temperature learning rate = policy learning rate, terminals only in the TD target, no EDAC-style output init
+        "cql": AUTHORS_CODE | {"init": "orthogonal_all", "out_init": False, "log_std_bounds": (-20.0, 2.0),
+                               "log_std_offset": -1.0, "alpha_lr": 3e-5, "timeouts": "bootstrap"},
+    },
+}
