@@ -16,7 +16,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from offrl_jax.algos.common import AutoStop, Stage, joint_schedule
+from offrl_jax.algos.common import AutoStop, Phase, joint_phases
 from offrl_jax.losses import BALANCES
 from offrl_jax.nets import INITS, Arch
 
@@ -114,10 +114,11 @@ class Config:
         """The offline updates this variant makes: `offline_updates`, or the study's."""
         return study_updates if self.offline_updates is None else self.offline_updates
 
-    def schedule(self, total_updates: int) -> list[Stage]:
-        """The phases of a run of `total_updates` updates, as plans (no networks needed): pre-training, when there is
-        any, then offline RL; a family that plans otherwise overrides this, and its algorithm's `phases` follows it."""
-        return joint_schedule(self, total_updates)
+    def phases(self, total_updates: int) -> list[Phase]:
+        """The phases of a run of `total_updates` updates, planned once (no networks needed; `Phase.update` None):
+        pre-training, when there is any, then offline RL.  A family that plans otherwise overrides this; its
+        algorithm gives each planned phase its update (`Algorithm.updates`)."""
+        return joint_phases(self, total_updates)
 
     def arch(self) -> Arch:
         """The layer-building choices (LayerNorm form, initialisation); a family with a constant hidden bias adds it

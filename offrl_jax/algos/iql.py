@@ -26,17 +26,16 @@ from flax import struct
 from offrl_jax import losses as L
 from offrl_jax.algos.common import (
     Algo,
+    Algorithm,
     Batch,
     Family,
     Model,
-    Phase,
     done_flags,
     gradient_step,
     new_model,
     polyak,
     pretrain_update,
     single,
-    stage_phases,
 )
 from offrl_jax.algos.config import Config, require
 from offrl_jax.nets import CriticEnsemble, DeterministicActor, GaussianActor, Value, gaussian_log_prob
@@ -78,7 +77,7 @@ class IQLState:
     value: Model
 
 
-class IQL:
+class IQL(Algorithm):
     def __init__(self, config: IQLConfig, obs_dim: int, act_dim: int, num_transitions: int = 0):
         self.cfg, self.obs_dim, self.act_dim = config, obs_dim, act_dim
         arch, hidden = config.arch(), config.actor_hidden or config.hidden
@@ -110,10 +109,9 @@ class IQL:
         mean, log_std = self.actor.apply(state.actor.params, obs)
         return jnp.clip(mean + jnp.exp(log_std) * jax.random.normal(key, mean.shape), -1.0, 1.0)
 
-    def phases(self, total_updates: int) -> list[Phase]:
-        return stage_phases(self.cfg.schedule(total_updates), {
-            "offline_rl": single(self.rl_update),
-            "pretrain": pretrain_update(self.cfg.pretrain, self.bc_update, self.mc_update)})
+    def updates(self):
+        return {"offline_rl": single(self.rl_update),
+                "pretrain": pretrain_update(self.cfg.pretrain, self.bc_update, self.mc_update)}
 
     def neg_log_lik(self, params, batch: Batch) -> jax.Array:
         """(B,) the actor's per-row loss of the dataset action: squared error, or the Gaussian's -log-likelihood."""

@@ -26,20 +26,19 @@ from flax import struct
 from offrl_jax import losses as L
 from offrl_jax.algos.common import (
     Algo,
+    Algorithm,
     Batch,
     Family,
     Model,
     Phase,
-    Stage,
     bc_step,
     done_flags,
     first,
     gradient_step,
-    joint_schedule,
+    joint_phases,
     new_model,
     polyak,
     pretrain_update,
-    stage_phases,
 )
 from offrl_jax.algos.config import Config, arch_with_bias, require
 from offrl_jax.nets import Arch, CriticEnsemble, DeterministicActor
@@ -89,9 +88,9 @@ class ReBRACConfig(Config):
     def arch(self) -> Arch:
         return arch_with_bias(self)
 
-    def schedule(self, total_updates: int) -> list[Stage]:
+    def phases(self, total_updates: int) -> list[Phase]:
         """Pre-training, then offline RL with the actor updated once every `policy_delay` critic updates."""
-        return joint_schedule(self, total_updates, self.policy_delay)
+        return joint_phases(self, total_updates, self.policy_delay)
 
 
 @struct.dataclass
@@ -100,7 +99,7 @@ class ReBRACState:
     critic: Model
 
 
-class ReBRAC:
+class ReBRAC(Algorithm):
     uses_next_actions = True  # the driver puts the dataset's next actions in every minibatch
 
     def __init__(self, config: ReBRACConfig, obs_dim: int, act_dim: int, num_transitions: int = 0):
@@ -128,10 +127,9 @@ class ReBRAC:
         decay = jnp.maximum(cfg.online_actor_beta_floor, 1.0 - progress)
         return {"critic_beta": cfg.online_critic_beta, "actor_beta": cfg.actor_beta * decay}
 
-    def phases(self, total_updates: int) -> list[Phase]:
-        return stage_phases(self.cfg.schedule(total_updates), {
-            "offline_rl": self.rl_update,
-            "pretrain": pretrain_update(self.cfg.pretrain, self.bc_update, self.mc_update)})
+    def updates(self):
+        return {"offline_rl": self.rl_update,
+                "pretrain": pretrain_update(self.cfg.pretrain, self.bc_update, self.mc_update)}
 
     def td_target(self, state: ReBRACState, batch: Batch, key: jax.Array) -> jax.Array:
         cfg = self.cfg

@@ -25,11 +25,11 @@ from flax import struct
 from offrl_jax import losses as L
 from offrl_jax.algos.common import (
     Algo,
+    Algorithm,
     Batch,
     Family,
     Model,
     Phase,
-    Stage,
     chain,
     done_flags,
     gradient_step,
@@ -38,7 +38,6 @@ from offrl_jax.algos.common import (
     repeat_obs,
     single,
     split_budget,
-    stage_phases,
     uniform_actions,
 )
 from offrl_jax.algos.config import AUTHORS_CODE, Config, arch_with_bias, check_cql_fields, require
@@ -110,15 +109,15 @@ class SACNConfig(Config):
     def arch(self) -> Arch:
         return arch_with_bias(self)
 
-    def schedule(self, total_updates: int) -> list[Stage]:
+    def phases(self, total_updates: int) -> list[Phase]:
         """Pre-training in two phases, soft BC ("actor_pretrain", `actor_pretrain_fraction` of `pretrain_updates`)
         then the critic on soft returns ("critic_pretrain"), then offline RL."""
         pre, rl = split_budget(total_updates, 0 if self.pretrain == "none" else self.pretrain_updates)
         actor_steps = {"actor": pre, "critic": 0, "actor+critic": int(pre * self.actor_pretrain_fraction)}.get(
             self.pretrain, 0)
-        stages = [Stage("actor_pretrain", actor_steps, auto_stop=self.auto_stop(("soft_bc_loss",))),
-                  Stage("critic_pretrain", pre - actor_steps, auto_stop=self.auto_stop(("mc_error",)))]
-        return [s for s in stages if s.steps] + [Stage("offline_rl", rl)]
+        planned = [Phase("actor_pretrain", steps=actor_steps, auto_stop=self.auto_stop(("soft_bc_loss",))),
+                   Phase("critic_pretrain", steps=pre - actor_steps, auto_stop=self.auto_stop(("mc_error",)))]
+        return [p for p in planned if p.steps] + [Phase("offline_rl", steps=rl)]
 
 
 @struct.dataclass
@@ -129,7 +128,7 @@ class SACNState:
     soft_returns: jax.Array  # (T,) soft returns-to-go of this seed's own soft-BC policy (zeros until computed)
 
 
-class SACN:
+class SACN(Algorithm):
     def __init__(self, config: SACNConfig, obs_dim: int, act_dim: int, num_transitions: int):
         self.cfg, self.obs_dim, self.act_dim, self.num_transitions = config, obs_dim, act_dim, num_transitions
         arch = config.arch()
@@ -164,11 +163,12 @@ class SACN:
         """Online the policy acts with a sample of its tanh-Gaussian (SAC's exploration)."""
         return self.sample_policy(state.actor.params, obs, key)[0]
 
-    def phases(self, total_updates: int) -> list[Phase]:
-        return stage_phases(self.cfg.schedule(total_updates), {
-            "actor_pretrain": single(chain(self.temperature_update, self.soft_bc_update)),
-            "critic_pretrain": single(self.soft_mc_update), "offline_rl": single(self.rl_update)},
-            on_start={"critic_pretrain": self.compute_soft_returns})
+    def updates(self):
+        return {"actor_pretrain": single(chain(self.temperature_update, self.soft_bc_update)),
+                "critic_pretrain": single(self.soft_mc_update), "offline_rl": single(self.rl_update)}
+
+    def start_hooks(self):
+        return {"critic_pretrain": self.compute_soft_returns}
 
     # ---------------------------------------------------------------------------------------- soft returns
     def compute_soft_returns(self, state: SACNState, data: Batch, key: jax.Array) -> SACNState:

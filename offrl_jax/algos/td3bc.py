@@ -23,22 +23,21 @@ from flax import struct
 from offrl_jax import losses as L
 from offrl_jax.algos.common import (
     Algo,
+    Algorithm,
     Batch,
     Family,
     Model,
     Phase,
-    Stage,
     bc_step,
     done_flags,
     first,
     gradient_step,
-    joint_schedule,
+    joint_phases,
     new_model,
     polyak,
     pretrain_update,
     repeat_obs,
     single,
-    stage_phases,
     uniform_actions,
 )
 from offrl_jax.algos.config import AUTHORS_CODE, Config, check_cql_fields, require
@@ -90,12 +89,12 @@ class TD3BCConfig(Config):
             raise ValueError(f"TD3BCConfig.{what} has no effect on the BC baseline (bc_only: every update is a BC "
                              "update); it takes pretrain = 'actor' only")
 
-    def schedule(self, total_updates: int) -> list[Stage]:
+    def phases(self, total_updates: int) -> list[Phase]:
         """BC for the whole budget (`bc_only`), or pre-training then offline RL with the actor updated once every
         `policy_delay` critic updates."""
         if self.bc_only:
-            return [Stage("actor_pretrain", total_updates)]
-        return joint_schedule(self, total_updates, self.policy_delay)
+            return [Phase("actor_pretrain", steps=total_updates)]
+        return joint_phases(self, total_updates, self.policy_delay)
 
 
 @struct.dataclass
@@ -104,7 +103,7 @@ class TD3BCState:
     critic: Model
 
 
-class TD3BC:
+class TD3BC(Algorithm):
     def __init__(self, config: TD3BCConfig, obs_dim: int, act_dim: int, num_transitions: int = 0):
         self.cfg, self.obs_dim, self.act_dim = config, obs_dim, act_dim
         arch = config.arch()
@@ -131,10 +130,9 @@ class TD3BC:
         episodes, whose returns are known, are then drawn."""
         return self.cfg.target == "max_mc"
 
-    def phases(self, total_updates: int) -> list[Phase]:
-        return stage_phases(self.cfg.schedule(total_updates), {
-            "actor_pretrain": single(self.bc_update), "offline_rl": self.rl_update,
-            "pretrain": pretrain_update(self.cfg.pretrain, self.bc_update, self.mc_update)})
+    def updates(self):
+        return {"actor_pretrain": single(self.bc_update), "offline_rl": self.rl_update,
+                "pretrain": pretrain_update(self.cfg.pretrain, self.bc_update, self.mc_update)}
 
     # --------------------------------------------------------------------------------------------- targets
     def td_target(self, state: TD3BCState, batch: Batch, key: jax.Array) -> jax.Array:
