@@ -61,10 +61,29 @@ class Algo:
     # it skips
     sections: tuple[str, ...] = ()
     skip: tuple[str, ...] = ()
+    # the values that make its form without behaviour terms (the fine-tuning study's online-rl arm: online RL with
+    # the data in its replay); None: it has none (IQL's actor is a weighted regression on the data)
+    without_behaviour: Mapping[str, Any] | None = None
+
+
+OFFLINE_RL = "offline_rl"  # the offline-RL phase, the last of every plan but behaviour cloning's
+
+
+@dataclasses.dataclass(frozen=True)
+class DataNeeds:
+    """What a family's updates read from the dataset beyond its device form (`offrl_jax.data.device.DATA_FIELDS`),
+    as its config declares it (`Config.needs`); the data layer builds what is declared (`data.device.for_updates`)."""
+    next_actions: bool = False  # each row's next action in its episode (ReBRAC's critic penalty)
+    # whether rows where the time limit cut the episode may be drawn (False: never, as CORL's loader drops them)
+    cut_rows: bool = True
+    # offline RL reads the Monte-Carlo returns (a max(MC, TD) target): online, only rows of ended episodes, whose
+    # returns are known, are drawn
+    returns: bool = False
 
 
 class Algorithm:
-    """What a family's algorithm class offers, built from its config (`cfg`, the family's config dataclass)."""
+    """What a family's algorithm class offers, built from its config (`cfg`, the family's config dataclass).  The
+    methods with a body here are optional: their defaults are a family with no such part."""
 
     cfg: Any
 
@@ -81,6 +100,17 @@ class Algorithm:
         updates, hooks = self.updates(), self.start_hooks()
         return [dataclasses.replace(p, update=updates[p.name], on_start=hooks.get(p.name))
                 for p in self.cfg.phases(total_updates)]
+
+    # ------------------------------------------------------------------------------------------------ online
+    def explore(self, state: Any, obs: jax.Array, key: jax.Array) -> jax.Array | None:
+        """The online action at normalised `obs`: a stochastic actor's sample; None (the default): the policy's
+        action (`act`) plus Gaussian noise of std `cfg.explore_noise` (TD3's exploration)."""
+        return None
+
+    def online_values(self, progress: jax.Array) -> dict[str, Any]:
+        """Sweepable hyper-parameters that take other values online, at `progress` (online updates done / all of
+        them, traced); none by default."""
+        return {}
 
 
 @struct.dataclass
@@ -118,6 +148,11 @@ class Phase:
     on_start: Callable[[Any, Batch, jax.Array], Any] | None = None
     # Pre-training that ends itself (`AutoStop`); `steps` is then its cap.
     auto_stop: AutoStop | None = None
+
+    @property
+    def pretraining(self) -> bool:
+        """Whether this is a pre-training phase (any offline phase but offline RL)."""
+        return self.name != OFFLINE_RL
 
 
 @dataclasses.dataclass(frozen=True)
@@ -206,7 +241,7 @@ def joint_phases(cfg: Any, total: int, policy_delay: int = 1) -> list[Phase]:
     per call)."""
     pre, rl = split_budget(total, 0 if cfg.pretrain == "none" else cfg.pretrain_updates)
     planned = [Phase("pretrain", steps=pre, auto_stop=cfg.auto_stop(PRETRAIN_MONITOR[cfg.pretrain]))] if pre else []
-    return planned + [Phase("offline_rl", steps=rl - rl % policy_delay, updates_per_call=policy_delay)]
+    return planned + [Phase(OFFLINE_RL, steps=rl - rl % policy_delay, updates_per_call=policy_delay)]
 
 
 def pretrain_update(mode: str, bc_update: UpdateFn, mc_update: UpdateFn) -> UpdateFn:

@@ -16,7 +16,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from offrl_jax.algos.common import AutoStop, Phase, joint_phases
+from offrl_jax.algos.common import AutoStop, DataNeeds, Phase, joint_phases
 from offrl_jax.losses import BALANCES
 from offrl_jax.nets import INITS, Arch
 
@@ -119,6 +119,11 @@ class Config:
         pre-training, when there is any, then offline RL.  A family that plans otherwise overrides this; its
         algorithm gives each planned phase its update (`Algorithm.updates`)."""
         return joint_phases(self, total_updates)
+
+    def needs(self) -> DataNeeds:
+        """What the updates read from the data: by default the device form's fields, every row drawn but, with
+        timeouts "drop", the rows a time limit cut; a family that reads more adds it."""
+        return DataNeeds(cut_rows=self.timeouts != "drop")
 
     def arch(self) -> Arch:
         """The layer-building choices (LayerNorm form, initialisation); a family with a constant hidden bias adds it

@@ -25,6 +25,7 @@ from flax import struct
 
 from offrl_jax import losses as L
 from offrl_jax.algos.common import (
+    OFFLINE_RL,
     Algo,
     Algorithm,
     Batch,
@@ -110,7 +111,7 @@ class IQL(Algorithm):
         return jnp.clip(mean + jnp.exp(log_std) * jax.random.normal(key, mean.shape), -1.0, 1.0)
 
     def updates(self):
-        return {"offline_rl": single(self.rl_update),
+        return {OFFLINE_RL: single(self.rl_update),
                 "pretrain": pretrain_update(self.cfg.pretrain, self.bc_update, self.mc_update)}
 
     def neg_log_lik(self, params, batch: Batch) -> jax.Array:

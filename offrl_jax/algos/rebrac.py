@@ -3,7 +3,7 @@ target, LayerNorm in the critic, a large batch and 3-layer networks.
 
     actor   mean(actor_beta ||pi(s) - a||^2 - Q(s, pi(s)) / sg(mean |Q|)),  Q = min over the critics
     critic  r + gamma (1 - d) (min_i Q'_i(s', a~') - critic_beta ||a~' - a'||^2),  a~' the target actor's smoothed
-            action, a' the dataset's next action (`driver.next_actions`; time-out rows are left out by default, as
+            action, a' the dataset's next action (`data.device.next_actions`; time-out rows are left out by default, as
             CORL's loader does, so a bootstrapped target never lacks one)
 
 One critic update per minibatch; every `policy_delay`-th also updates the actor on the same minibatch, after the
@@ -25,9 +25,11 @@ from flax import struct
 
 from offrl_jax import losses as L
 from offrl_jax.algos.common import (
+    OFFLINE_RL,
     Algo,
     Algorithm,
     Batch,
+    DataNeeds,
     Family,
     Model,
     Phase,
@@ -92,6 +94,10 @@ class ReBRACConfig(Config):
         """Pre-training, then offline RL with the actor updated once every `policy_delay` critic updates."""
         return joint_phases(self, total_updates, self.policy_delay)
 
+    def needs(self) -> DataNeeds:
+        """The critic's penalty reads each row's next action in its episode."""
+        return dataclasses.replace(super().needs(), next_actions=True)
+
 
 @struct.dataclass
 class ReBRACState:
@@ -100,8 +106,6 @@ class ReBRACState:
 
 
 class ReBRAC(Algorithm):
-    uses_next_actions = True  # the driver puts the dataset's next actions in every minibatch
-
     def __init__(self, config: ReBRACConfig, obs_dim: int, act_dim: int, num_transitions: int = 0):
         self.cfg, self.obs_dim, self.act_dim = config, obs_dim, act_dim
         arch = config.arch()
@@ -128,7 +132,7 @@ class ReBRAC(Algorithm):
         return {"critic_beta": cfg.online_critic_beta, "actor_beta": cfg.actor_beta * decay}
 
     def updates(self):
-        return {"offline_rl": self.rl_update,
+        return {OFFLINE_RL: self.rl_update,
                 "pretrain": pretrain_update(self.cfg.pretrain, self.bc_update, self.mc_update)}
 
     def td_target(self, state: ReBRACState, batch: Batch, key: jax.Array) -> jax.Array:
@@ -178,7 +182,7 @@ class ReBRAC(Algorithm):
 
 
 FAMILY = Family(ReBRACConfig, ReBRAC)
-ALGOS = {"rebrac": Algo("rebrac")}
+ALGOS = {"rebrac": Algo("rebrac", without_behaviour={"actor_beta": 0.0, "critic_beta": 0.0})}
 # ReBRAC's published values per env, keyed as `offrl_jax.algos.ENV_DEFAULTS`
 ENV_DEFAULTS = {
     # the medium datasets' betas (CORL's configs/offline/rebrac/<env>/medium_v2.yaml)

@@ -24,6 +24,7 @@ from flax import struct
 
 from offrl_jax import losses as L
 from offrl_jax.algos.common import (
+    OFFLINE_RL,
     Algo,
     Algorithm,
     Batch,
@@ -117,7 +118,7 @@ class SACNConfig(Config):
             self.pretrain, 0)
         planned = [Phase("actor_pretrain", steps=actor_steps, auto_stop=self.auto_stop(("soft_bc_loss",))),
                    Phase("critic_pretrain", steps=pre - actor_steps, auto_stop=self.auto_stop(("mc_error",)))]
-        return [p for p in planned if p.steps] + [Phase("offline_rl", steps=rl)]
+        return [p for p in planned if p.steps] + [Phase(OFFLINE_RL, steps=rl)]
 
 
 @struct.dataclass
@@ -165,7 +166,7 @@ class SACN(Algorithm):
 
     def updates(self):
         return {"actor_pretrain": single(chain(self.temperature_update, self.soft_bc_update)),
-                "critic_pretrain": single(self.soft_mc_update), "offline_rl": single(self.rl_update)}
+                "critic_pretrain": single(self.soft_mc_update), OFFLINE_RL: single(self.rl_update)}
 
     def start_hooks(self):
         return {"critic_pretrain": self.compute_soft_returns}
@@ -307,9 +308,10 @@ class SACN(Algorithm):
 
 FAMILY = Family(SACNConfig, SACN)
 ALGOS = {
-    "edac": Algo("sacn"),
-    "sacn": Algo("sacn", {"eta": 0.0}, sections=("edac",), skip=("eta",)),  # EDAC's ensemble sizes
-    "edac_bc": Algo("sacn", {"bc_weight": 1.0}, sections=("edac",)),
+    "edac": Algo("sacn", without_behaviour={}),
+    # EDAC's ensemble sizes
+    "sacn": Algo("sacn", {"eta": 0.0}, sections=("edac",), skip=("eta",), without_behaviour={}),
+    "edac_bc": Algo("sacn", {"bc_weight": 1.0}, sections=("edac",), without_behaviour={"bc_weight": 0.0}),
     # the authors' CQL configs (their CORL fork's configs/cql/door): cql_min_q_weight 10, policy_lr 3e-5, no entropy in
     # the backup (CORL's own door/pen configs, added later: cql_alpha 1, policy_lr 1e-4)
     "cql": Algo("sacn", {"num_critics": 2, "eta": 0.0, "cql_alpha": 10.0, "backup_entropy": False,

@@ -22,9 +22,11 @@ from flax import struct
 
 from offrl_jax import losses as L
 from offrl_jax.algos.common import (
+    OFFLINE_RL,
     Algo,
     Algorithm,
     Batch,
+    DataNeeds,
     Family,
     Model,
     Phase,
@@ -96,6 +98,10 @@ class TD3BCConfig(Config):
             return [Phase("actor_pretrain", steps=total_updates)]
         return joint_phases(self, total_updates, self.policy_delay)
 
+    def needs(self) -> DataNeeds:
+        """The max(MC, TD) target reads the Monte-Carlo returns in offline RL."""
+        return dataclasses.replace(super().needs(), returns=self.target == "max_mc")
+
 
 @struct.dataclass
 class TD3BCState:
@@ -124,14 +130,8 @@ class TD3BC(Algorithm):
     def act(self, state: TD3BCState, obs: jax.Array) -> jax.Array:
         return self.actor.apply(state.actor.params, obs)
 
-    @property
-    def reads_returns(self) -> bool:
-        """Whether offline RL reads the Monte-Carlo returns (max(MC, TD) targets): online, only rows of ended
-        episodes, whose returns are known, are then drawn."""
-        return self.cfg.target == "max_mc"
-
     def updates(self):
-        return {"actor_pretrain": single(self.bc_update), "offline_rl": self.rl_update,
+        return {"actor_pretrain": single(self.bc_update), OFFLINE_RL: self.rl_update,
                 "pretrain": pretrain_update(self.cfg.pretrain, self.bc_update, self.mc_update)}
 
     # --------------------------------------------------------------------------------------------- targets
@@ -204,8 +204,8 @@ class TD3BC(Algorithm):
 FAMILY = Family(TD3BCConfig, TD3BC)
 ALGOS = {
     "bc": Algo("td3bc", {"bc_only": True, "pretrain": "actor"}),
-    "td3bc": Algo("td3bc"),
-    "td3bc_cql": Algo("td3bc", {"cql_weight": 10.0}),
+    "td3bc": Algo("td3bc", without_behaviour={"bc_weight": 0.0}),
+    "td3bc_cql": Algo("td3bc", {"cql_weight": 10.0}, without_behaviour={"bc_weight": 0.0, "cql_weight": 0.0}),
 }
 # The paper's per-env values (Section 5, Appendix G Table 3), keyed by (family or algorithm, env) as
 # `offrl_jax.algos.ENV_DEFAULTS`.  Adroit's alpha is the paper's Table 3 value (0.1, pen's 1.0; the authors' door
