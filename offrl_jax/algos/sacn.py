@@ -11,6 +11,9 @@ algorithms (`ALGOS`):
 Pre-training (Alg. 2): soft BC with the temperature tuned (`actor`), then soft returns-to-go computed once with that
 actor and alpha, then critic regression on them with the diversity loss as regulariser (`critic`), then offline RL
 with alpha carried over.  `actor+critic` runs both phases in that order (the paper's procedure for soft algorithms).
+
+Over 300 lines for a stated reason: the file is the family's whole algorithm, its four named algorithms with their
+per-env values and presets included, so that reading it is reading EDAC, SAC-N, EDAC+BC and CQL.
 """
 from __future__ import annotations
 
