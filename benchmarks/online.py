@@ -168,7 +168,7 @@ def policy_probe(driver: Driver, algo, form, states, calls: int = 300, rounds: i
     observations in and S actions out)."""
     members = len(driver.members)
     explore = exploration_policy(algo.act, form.obs_mean, form.obs_std, algo.cfg.explore_noise,
-                                 getattr(algo, "explore", None))
+                                 algo.explore)
     keys, obs = exploration_keys(driver.members), np.zeros((members, OBS_DIM), np.float32)
     placed = driver.layout.place(states)
     actor = placed.replace(**{f.name: None for f in dataclasses.fields(placed) if f.name != "actor"},

@@ -36,7 +36,7 @@ import dataclasses
 import math
 from pathlib import Path
 
-from offrl_jax.algos import make_algorithm
+from offrl_jax.algos import ALGOS, make_algorithm
 from offrl_jax.algos.config import ONLINE_FIELDS
 from offrl_jax.app.command import run_command
 from offrl_jax.app.outputs import saved_studies
@@ -52,12 +52,9 @@ ONLINE_DEFAULTS = {f.name: f.default for f in dataclasses.fields(OnlineConfig) i
 
 ARMS = {"pretrained": {"pretrain": "actor+critic"}, "scratch": {"pretrain": "none"},
         "pretrain-only": {"pretrain": "actor+critic"},  # pre-training takes the offline budget
-        "online-rl": {"pretrain": "none", "offline_updates": 0}}  # no offline phase; the family without its
-# behaviour terms (RLPD's recipe without its ensemble: online RL with the data in its replay); families that have no
-# such form (IQL's actor is a weighted regression on the data) have no online-rl arm
-WITHOUT_BEHAVIOUR = {"td3bc": {"bc_weight": 0.0}, "td3bc_cql": {"bc_weight": 0.0, "cql_weight": 0.0},
-                     "rebrac": {"actor_beta": 0.0, "critic_beta": 0.0}, "edac": {}, "sacn": {},
-                     "edac_bc": {"bc_weight": 0.0}}
+        "online-rl": {"pretrain": "none", "offline_updates": 0}}  # no offline phase; the algorithm without its
+# behaviour terms (its `without_behaviour` values, in its family's file: RLPD's recipe without its ensemble, online RL
+# with the data in its replay); algorithms that have no such form (IQL) have no online-rl arm
 ONLINE_FLAGS = {"online_steps": "steps", "online_block": "block", "utd": "utd", "warmup_steps": "warmup",
                 "buffer_capacity": "capacity", "online_eval_every": "eval_every"}
 
@@ -73,14 +70,15 @@ def build(args) -> Study:
                          "(the pretrain-only arm is imitation, then improvement online)")
     online = online_config(args)
     if args.arms is None:
-        args.arms = [arm for arm in ARMS if arm != "online-rl" or args.algo in WITHOUT_BEHAVIOUR]
+        args.arms = [arm for arm in ARMS if arm != "online-rl" or ALGOS[args.algo].without_behaviour is not None]
     if "pretrain-only" in args.arms and (getattr(args, "pretrain_updates", None) or {}).get("pretrain_auto"):
         raise UsageError("--pretrain-updates auto: the pretrain-only arm pre-trains for the whole offline budget "
                          "(--updates); give a number, or leave that arm out (--arms pretrained scratch)")
-    if "online-rl" in args.arms and args.algo not in WITHOUT_BEHAVIOUR:
+    without = {name: algo.without_behaviour for name, algo in ALGOS.items() if algo.without_behaviour is not None}
+    if "online-rl" in args.arms and args.algo not in without:
         raise UsageError(f"--arms online-rl: {args.algo} has no form without its behaviour terms (online-rl runs "
-                         f"with --algo {', '.join(WITHOUT_BEHAVIOUR)}); leave that arm out")
-    own = {arm: ARMS[arm] | (WITHOUT_BEHAVIOUR[args.algo] if arm == "online-rl" else {}) for arm in args.arms}
+                         f"with --algo {', '.join(without)}); leave that arm out")
+    own = {arm: ARMS[arm] | (dict(without[args.algo]) if arm == "online-rl" else {}) for arm in args.arms}
     whole = {"pretrain_updates": args.updates}  # pretrain-only's, whatever --pretrain-updates gives the others
     variants = tuple(v for arm in args.arms for v in study_variants(
         arm, args.algo, own[arm], args, fixed=whole if arm == "pretrain-only" else None))

@@ -36,21 +36,11 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
 
 from offrl_jax.algos.common import Phase, with_hparams
-from offrl_jax.data.dataset import rows_without_timeouts
-from offrl_jax.data.device import DATA_FIELDS, OPTIONAL_FIELDS
+from offrl_jax.data.device import DATA_FIELDS, OPTIONAL_FIELDS, for_updates
 from offrl_jax.system.distributed import to_host
 
 # draw(key, data, a member's online buffer, shape) -> the minibatches of an online update call
 Draw = Callable[[jax.Array, dict[str, jax.Array], Any, tuple[int, ...]], dict[str, jax.Array]]
-
-
-def next_actions(actions: jax.Array, terminals: jax.Array, timeouts: jax.Array) -> jax.Array:
-    """(T, A) the dataset's action at the next row of the same episode.  The last row of an episode has none: its
-    own action stands in (at a terminal the TD target does not bootstrap, so it is never used; at a time-out it is,
-    unless timeouts="drop" leaves the row out, as CORL's ReBRAC loader does; and at the dataset's last row)."""
-    ends = jnp.maximum(terminals, timeouts).at[-1].set(1.0)
-    following = jnp.concatenate([actions[1:], actions[-1:]])
-    return jnp.where(ends[:, None] > 0, actions, following)
 
 
 def seed_keys(seeds: tuple[int, ...], stream: int, index: int | None = None) -> jax.Array:
@@ -160,7 +150,7 @@ def make_chunk_fn(phase: Phase, batch_size: int, num_calls: int,
 
     def one_seed(state, data, key, start, buffer, hparams):
         member_phase = phase if phase_for is None else phase_for(hparams)
-        rows = data.get("rows")  # the rows that may be sampled, when some are excluded (timeouts="drop")
+        rows = data.get("rows")  # the rows that may be sampled, when some are never drawn (`data.device.for_updates`)
         n = data["rewards"].shape[0] if rows is None else rows.shape[0]
 
         def body(state, update):
@@ -253,13 +243,7 @@ class Driver:
         values = tuple(sweep[1]) if sweep else (None,)
         self.members = tuple(s for _ in values for s in self.seeds)  # value-major: member j * S + i
         self.layout = member_layout(len(self.members), devices, members)  # members: "map"/"vmap" (default: platform)
-        if getattr(algo, "uses_next_actions", False) and "next_actions" not in data:
-            data = data | {"next_actions": next_actions(data["actions"], data["terminals"], data["timeouts"])}
-        if getattr(algo.cfg, "timeouts", "bootstrap") == "drop":  # CORL's loader: time-out rows are never sampled
-            rows = rows_without_timeouts(data["timeouts"])
-            if not len(rows):
-                raise ValueError("every transition is a time-out row: timeouts = 'drop' leaves nothing to sample")
-            data = data | {"rows": jnp.asarray(rows, jnp.int32)}
+        data = for_updates(data, algo.cfg.needs())  # what the algorithm's updates read besides the device form
         self.data = jax.device_put(data, self.layout.replicated)  # one copy per device, shared by its members
         self.hparams = None
         if sweep:

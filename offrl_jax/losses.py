@@ -60,8 +60,10 @@ def mc_critic_loss(q: jax.Array, returns: jax.Array) -> jax.Array:
 def td_target(reward: jax.Array, terminal: jax.Array, next_value: jax.Array, gamma: float) -> jax.Array:
     """One-step target r + gamma (1 - terminal) V(s').  (B,) each -> (B,).
 
-    Only true terminals stop bootstrapping: a time-out is not the end of the task, so its successor's value is
-    bootstrapped through (`terminal` must be the terminal flag, not terminal-or-timeout).
+    `terminal` is 1.0 where the target stops bootstrapping, as the algorithm's `timeouts` says
+    (`offrl_jax.algos.common.done_flags`): by default the terminal flag alone, since a time-out is not the end of the
+    task and its successor's value is bootstrapped through; terminal-or-timeout under timeouts "stop" (the authors'
+    code, their `authors` preset).
     """
     assert_shapes(reward=(reward, "B"), terminal=(terminal, "B"), next_value=(next_value, "B"))
     return reward + gamma * (1.0 - terminal) * next_value

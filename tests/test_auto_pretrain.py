@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from offrl_jax.algos import make_algorithm, make_config
-from offrl_jax.algos.common import AutoStop, Phase
+from offrl_jax.algos.common import AutoStop, DataNeeds, Phase
 from offrl_jax.driver import Driver, check_call_grid
 
 
@@ -38,7 +38,8 @@ def counter_algo(cap=1000, rest=500, flat_at=(500, 500)):
 
     phases = [Phase("pretrain", pretrain, cap, auto_stop=AutoStop(("loss",), window=100, tol=0.01)),
               Phase("offline_rl", offline, rest)]
-    algo = SimpleNamespace(cfg=SimpleNamespace(), init=lambda key: (jnp.zeros(()), jnp.zeros((), jnp.int32)))
+    algo = SimpleNamespace(cfg=SimpleNamespace(needs=DataNeeds),  # reads the device form alone
+                           init=lambda key: (jnp.zeros(()), jnp.zeros((), jnp.int32)))
     return algo, phases
 
 

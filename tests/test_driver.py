@@ -210,3 +210,25 @@ def test_a_chunk_runs_in_slices_that_change_nothing_but_when_the_caller_hears(ti
     with pytest.raises(KeyboardInterrupt):
         list(Driver(algo, data, (0, 1), batch_size=32).run(algo.phases(2000), 2000, on_slice=stop_after_three))
     assert heard == [200] * 3
+
+
+def test_what_an_algorithms_updates_read_is_declared_by_its_config_and_built_by_the_data_layer(tiny_dataset):
+    """`Config.needs()` declares what the updates read beyond the device form; `for_updates` builds exactly that:
+    ReBRAC's next actions and, with timeouts "drop", the rows that may be drawn; nothing more for TD3+BC."""
+    from offrl_jax.algos.common import DataNeeds
+    from offrl_jax.data.device import for_updates, next_actions
+
+    arrays = device_data(tiny_dataset, 0.99).arrays
+    assert make_config("td3bc", "hopper").needs() == DataNeeds()
+    assert for_updates(arrays, DataNeeds()) is arrays
+    assert make_config("td3bc", "hopper", target="max_mc").needs() == DataNeeds(returns=True)
+    rebrac = make_config("rebrac", "hopper")
+    assert rebrac.timeouts == "drop" and rebrac.needs() == DataNeeds(next_actions=True, cut_rows=False)
+    built = for_updates(arrays, rebrac.needs())
+    np.testing.assert_array_equal(built["next_actions"],
+                                  next_actions(arrays["actions"], arrays["terminals"], arrays["timeouts"]))
+    timeouts = np.asarray(arrays["timeouts"])
+    assert timeouts.any() and not timeouts.all()
+    np.testing.assert_array_equal(built["rows"], np.flatnonzero(timeouts == 0))
+    kept = for_updates(arrays, make_config("rebrac", "hopper", timeouts="bootstrap").needs())
+    assert "rows" not in kept and "next_actions" in kept

@@ -194,3 +194,24 @@ def test_help_states_the_default_the_study_runs(module):
     if module == "experiments.ablation":  # the paper's per-env alphas, hopper's first
         assert stated["alpha"] == ("hopper", [(None, None, 10.0)])
         assert "Default: none" in " ".join(shown.stdout.split())
+
+
+def _committed_configs() -> list[Path]:
+    """Every results/**/config.json in the repository that is one study's (a multi-study run's top file lists them)."""
+    return sorted(p for p in (ROOT / "results").rglob("config.json") if "studies" not in json.loads(p.read_text()))
+
+
+@pytest.mark.parametrize("path", _committed_configs(), ids=lambda p: str(p.relative_to(ROOT / "results")))
+def test_every_committed_run_resolves_to_the_values_it_recorded(path):
+    """Replayed through the code --config, --resume and --dry-run use, a committed run's variants resolve to the
+    values and sources its config.json recorded (a field added after the run has no recorded source)."""
+    from offrl_jax.run.resume import resolved_differences
+    from offrl_jax.run.study import Study
+
+    study = Study.from_json(path.read_text())
+    assert resolved_differences(study, path) == []
+    saved = json.loads(path.read_text()).get("sources") or {}
+    now = study.sources()
+    assert set(saved) <= set(now)
+    for label, fields in saved.items():
+        assert {k: now[label][k] for k in fields} == fields

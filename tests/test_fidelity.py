@@ -10,7 +10,7 @@ import pytest
 
 from offrl_jax import losses as L
 from offrl_jax.algos import PRESETS, make_algorithm, make_config
-from offrl_jax.algos.common import Phase, done_flags
+from offrl_jax.algos.common import DataNeeds, Phase, done_flags
 from offrl_jax.driver import Driver, make_chunk_fn
 from offrl_jax.nets import MLP, Arch, sample_tanh_gaussian, tanh_gaussian_log_prob
 
@@ -95,7 +95,7 @@ def test_a_driver_refuses_data_left_empty_by_dropping_time_outs():
     n = 4
     data = {k: jnp.zeros((n, 2)) for k in ("observations", "next_observations", "actions")}
     data |= {k: jnp.zeros(n) for k in ("rewards", "terminals", "returns")} | {"timeouts": jnp.ones(n)}
-    algo = SimpleNamespace(cfg=SimpleNamespace(timeouts="drop"))
+    algo = SimpleNamespace(cfg=SimpleNamespace(needs=lambda: DataNeeds(cut_rows=False)))  # timeouts "drop"
     with pytest.raises(ValueError, match="every transition is a time-out row"):
         Driver(algo, data, seeds=(0,), batch_size=2)
 

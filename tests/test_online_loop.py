@@ -445,3 +445,22 @@ def test_a_member_that_diverges_online_is_left_out_and_the_others_finish(tmp_pat
         rewards = f["rewards"][:]
     assert len(rewards) == 1500 and np.isnan(rewards[300:]).all() and np.isfinite(rewards[:300]).all()
 
+
+
+def test_an_algorithms_online_rl_arm_is_the_form_its_registry_entry_declares(monkeypatch):
+    """The fine-tuning study's online-rl arm is the algorithm without its behaviour terms as its `ALGOS` entry
+    declares them (`without_behaviour`): a new entry that declares a form gets the arm, with those values."""
+    import argparse
+
+    from experiments import finetune
+    from offrl_jax import algos
+    from offrl_jax.algos.common import Algo
+
+    monkeypatch.setitem(algos.ALGOS, "td3bc_alpha5", Algo("td3bc", {"alpha": 5.0},
+                                                          without_behaviour={"bc_weight": 0.0, "alpha": 1.0}))
+    args = finetune.make_parser().parse_args(["--algo", "td3bc_alpha5", "--env", "hopper"])
+    study = finetune.build(argparse.Namespace(**vars(args), typed=frozenset()))
+    arms = {v.label: study.config(v.label) for v in study.variants}
+    assert "online-rl" in arms
+    assert (arms["online-rl"].bc_weight, arms["online-rl"].alpha) == (0.0, 1.0)
+    assert arms["scratch"].bc_weight == 1.0

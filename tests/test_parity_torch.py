@@ -415,7 +415,7 @@ def rebrac_pairs(state, agent: ref.ReBRAC):
 def test_rebrac_rl_update_matches_torch():
     """10 offline-RL updates (5 calls: the critics on both minibatches, the actor and every target after the first),
     with both behaviour penalties on and the dataset's next actions in the critic's target."""
-    from offrl_jax.driver import next_actions
+    from offrl_jax.data.device import next_actions
 
     data = dataset()
     data["next_actions"] = np.asarray(next_actions(jnp.asarray(data["actions"]), jnp.asarray(data["terminals"]),

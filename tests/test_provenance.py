@@ -2,7 +2,9 @@
 import json
 
 import numpy as np
+import pytest
 
+from offrl_jax.algos import ALGOS, FAMILIES
 from offrl_jax.run.provenance import command_line, fingerprint, run_record
 from offrl_jax.run.runner import run_study
 from offrl_jax.run.study import Study, Variant
@@ -31,14 +33,27 @@ def test_config_json_holds_the_resolved_config_and_round_trips(tiny_dataset):
     assert len(again["runs"]) == 2 and again["runs"][0] == record
 
 
-def test_resolve_applies_its_layers_in_order_and_says_where_each_value_came_from():
-    from offrl_jax.algos import SACNConfig, TD3BCConfig, resolve
+@pytest.mark.parametrize("algo", list(ALGOS))
+def test_with_no_env_and_no_preset_a_config_is_its_dataclass_defaults_and_its_algorithm_values(algo):
+    from offrl_jax.algos import resolve
 
-    plain = resolve("rebrac")  # no env: the dataclass, and the per-env table's entries for every env ("*")
+    entry = ALGOS[algo]
+    resolved = resolve(algo, "")
+    assert resolved.config == FAMILIES[entry.family].config(**entry.values)
+    assert resolved.sources == {name: "algo" if name in entry.values else "default" for name in resolved.sources}
+
+
+def test_resolve_applies_its_layers_in_order_and_says_where_each_value_came_from():
+    from offrl_jax.algos import resolve
+    from offrl_jax.algos.sacn import SACNConfig
+    from offrl_jax.algos.td3bc import TD3BCConfig
+
+    plain = resolve("rebrac")  # no env: the dataclass
     assert set(plain.sources.values()) == {"default"}
     anywhere = resolve("td3bc")
-    assert (anywhere.config.alpha, anywhere.sources["alpha"]) == (0.1, "per-env")
-    assert TD3BCConfig().alpha == 2.5
+    assert (anywhere.config.alpha, anywhere.sources["alpha"]) == (2.5, "default") and TD3BCConfig().alpha == 2.5
+    door = resolve("td3bc", "door")  # Adroit's alpha is named under each of its envs
+    assert (door.config.alpha, door.sources["alpha"]) == (0.1, "per-env")
     hopper = resolve("td3bc", "hopper")
     assert (hopper.config.alpha, hopper.sources["alpha"]) == (10.0, "per-env")
     assert (hopper.config.gamma, hopper.sources["gamma"]) == (0.99, "default")

@@ -7,7 +7,7 @@ import pytest
 
 from offrl_jax import losses as L
 from offrl_jax.algos import make_algorithm, make_config
-from offrl_jax.driver import next_actions
+from offrl_jax.data.device import next_actions
 
 
 def test_next_actions_stay_inside_the_episode():

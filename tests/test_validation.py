@@ -176,14 +176,16 @@ def test_load_policy_rejects_arguments(tmp_path, kw, message):
 
 @pytest.mark.parametrize("algo", ["bc", "td3bc", "td3bc_cql", "edac", "sacn", "edac_bc", "cql", "rebrac", "iql"])
 @pytest.mark.parametrize("pretrain", ["none", "actor", "critic", "actor+critic"])
-def test_a_configs_schedule_is_its_algorithms_phases(algo, pretrain):
-    """What a budget check and a dry run read (`Config.schedule`, no networks) is what training runs."""
+def test_a_configs_planned_phases_are_its_algorithms_phases(algo, pretrain):
+    """What a budget check and a dry run read (`Config.phases`, no networks) is what training runs: the same
+    phases, each given its update function."""
     from offrl_jax.algos import make_algorithm, make_config
 
     config = make_config(algo, "hopper", **({} if algo == "bc" else {"pretrain": pretrain, "pretrain_updates": 999}))
     phases = make_algorithm(config, obs_dim=3, act_dim=2, num_transitions=10).phases(5_001)
-    assert [(s.name, s.steps, s.updates_per_call, s.auto_stop) for s in config.schedule(5_001)] == \
-        [(p.name, p.steps, p.updates_per_call, p.auto_stop) for p in phases]
+    planned = config.phases(5_001)
+    assert all(p.update is None for p in planned) and all(callable(p.update) for p in phases)
+    assert [dataclasses.replace(p, update=None, on_start=None) for p in phases] == planned
 
 
 def test_a_studys_budget_check_builds_no_algorithm(monkeypatch):

@@ -1,11 +1,13 @@
 """What every algorithm shares: a trainable `Model` (params + target + optimiser state), the `Phase` record the
 driver runs, and small helpers to take a gradient step and to chain update functions.
 
-An algorithm is a frozen config plus pure functions:
+An algorithm (`Algorithm`) is a frozen config plus pure functions:
     init(key) -> AgentState                                  (a pytree of arrays: vmappable over seeds, checkpointable)
-    phases(total_updates) -> list[Phase]                     (pre-training phases, then offline RL)
+    updates() -> {phase name: update function}               (one per phase its config plans)
     act(state, obs) -> action                                (deterministic policy for evaluation)
-Each `Phase.update(state, batch, key) -> (state, metrics)` is one scan body; batch leaves are (k, B, ...) with
+The config plans the phases (`Config.phases(total_updates)`: pre-training phases, then offline RL), once, before any
+network exists; `Algorithm.phases` gives each planned phase its update function.  Each
+`Phase.update(state, batch, key) -> (state, metrics)` is one scan body; batch leaves are (k, B, ...) with
 k = `Phase.updates_per_call` minibatches (k = 2 for TD3's delayed actor update).  `single` / `first` hand a loss the
 (B, ...) minibatch.
 
@@ -25,7 +27,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import jax
@@ -40,6 +42,75 @@ Params = Any
 Batch = dict[str, jax.Array]
 Metrics = dict[str, jax.Array]
 UpdateFn = Callable[[Any, Batch, jax.Array], tuple[Any, Metrics]]
+
+
+@dataclasses.dataclass(frozen=True)
+class Family:
+    """A family of algorithms: its config dataclass (extending `offrl_jax.algos.config.Config`) and the algorithm
+    class built from it, `algorithm(config, obs_dim, act_dim, num_transitions)` with `init`, `phases` and `act`."""
+    config: type
+    algorithm: type
+
+
+@dataclasses.dataclass(frozen=True)
+class Algo:
+    """An algorithm: a family plus the config values that make it that algorithm (td3bc_cql's cql_weight)."""
+    family: str  # a key of `offrl_jax.algos.FAMILIES`
+    values: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    # the per-env sections (`ENV_DEFAULTS`) it reads after its family's and before its own, and the values of those
+    # it skips
+    sections: tuple[str, ...] = ()
+    skip: tuple[str, ...] = ()
+    # the values that make its form without behaviour terms (the fine-tuning study's online-rl arm: online RL with
+    # the data in its replay); None: it has none (IQL's actor is a weighted regression on the data)
+    without_behaviour: Mapping[str, Any] | None = None
+
+
+OFFLINE_RL = "offline_rl"  # the offline-RL phase, the last of every plan but behaviour cloning's
+
+
+@dataclasses.dataclass(frozen=True)
+class DataNeeds:
+    """What a family's updates read from the dataset beyond its device form (`offrl_jax.data.device.DATA_FIELDS`),
+    as its config declares it (`Config.needs`); the data layer builds what is declared (`data.device.for_updates`)."""
+    next_actions: bool = False  # each row's next action in its episode (ReBRAC's critic penalty)
+    # whether rows where the time limit cut the episode may be drawn (False: never, as CORL's loader drops them)
+    cut_rows: bool = True
+    # offline RL reads the Monte-Carlo returns (a max(MC, TD) target): online, only rows of ended episodes, whose
+    # returns are known, are drawn
+    returns: bool = False
+
+
+class Algorithm:
+    """What a family's algorithm class offers, built from its config (`cfg`, the family's config dataclass).  The
+    methods with a body here are optional: their defaults are a family with no such part."""
+
+    cfg: Any
+
+    def updates(self) -> dict[str, UpdateFn]:
+        """{phase name: its update function} for every phase the config may plan (`Config.phases`)."""
+        raise NotImplementedError
+
+    def start_hooks(self) -> dict[str, Callable[[Any, Batch, jax.Array], Any]]:
+        """{phase name: (state, data, key) -> state, called once before that phase starts}; none by default."""
+        return {}
+
+    def phases(self, total_updates: int) -> list[Phase]:
+        """The config's plan of a run of `total_updates` updates, each phase with its update and start hook."""
+        updates, hooks = self.updates(), self.start_hooks()
+        return [dataclasses.replace(p, update=updates[p.name], on_start=hooks.get(p.name))
+                for p in self.cfg.phases(total_updates)]
+
+    # ------------------------------------------------------------------------------------------------ online
+    def explore(self, state: Any, obs: jax.Array, key: jax.Array) -> jax.Array | None:
+        """The online action at normalised `obs`: a stochastic actor's sample; None (the default): the policy's
+        action (`act`) plus Gaussian noise of std `cfg.explore_noise` (TD3's exploration)."""
+        return None
+
+    def online_values(self, progress: jax.Array) -> dict[str, Any]:
+        """Sweepable hyper-parameters that take other values online, at `progress` (online updates done / all of
+        them, traced); none by default."""
+        return {}
 
 
 @struct.dataclass
@@ -68,13 +139,20 @@ def polyak(model: Model, tau: float) -> Model:
 @dataclasses.dataclass(frozen=True)
 class Phase:
     name: str  # "actor_pretrain", "critic_pretrain", "pretrain", "offline_rl"
-    update: UpdateFn
-    steps: int  # gradient updates in this phase (a multiple of updates_per_call)
+    # None in a plan (`Config.phases`: what a budget check and a dry run read); the algorithm gives each planned
+    # phase its update (`Algorithm.phases`)
+    update: UpdateFn | None = None
+    steps: int = 0  # gradient updates in this phase (a multiple of updates_per_call)
     updates_per_call: int = 1
     # Called once (jitted, vmapped over seeds) before the phase starts: (state, data, key) -> state.
     on_start: Callable[[Any, Batch, jax.Array], Any] | None = None
     # Pre-training that ends itself (`AutoStop`); `steps` is then its cap.
     auto_stop: AutoStop | None = None
+
+    @property
+    def pretraining(self) -> bool:
+        """Whether this is a pre-training phase (any offline phase but offline RL)."""
+        return self.name != OFFLINE_RL
 
 
 @dataclasses.dataclass(frozen=True)
@@ -153,40 +231,23 @@ def single(update: UpdateFn) -> UpdateFn:
     return lambda state, batch, key: update(state, first(batch), key)
 
 
-@dataclasses.dataclass(frozen=True)
-class Stage:
-    """A phase as a config plans it (`Config.schedule`), before any network exists: what a budget check and a dry
-    run read; the algorithm gives each its update function (`stage_phases`)."""
-    name: str  # as `Phase.name`
-    steps: int
-    updates_per_call: int = 1
-    auto_stop: AutoStop | None = None
-
-
 PRETRAIN_MONITOR = {"actor": ("bc_loss",), "critic": ("mc_error",), "actor+critic": ("bc_loss", "mc_error")}
 
 
-def joint_schedule(cfg: Any, total: int, policy_delay: int = 1) -> list[Stage]:
-    """The stages of a family that pre-trains its actor by BC and its critic on MC returns in one phase: "pretrain"
-    (`cfg.pretrain` "actor", "critic" or "actor+critic", `cfg.pretrain_updates` long, ending itself with
+def joint_phases(cfg: Any, total: int, policy_delay: int = 1) -> list[Phase]:
+    """The planned phases of a family that pre-trains its actor by BC and its critic on MC returns in one phase:
+    "pretrain" (`cfg.pretrain` "actor", "critic" or "actor+critic", `cfg.pretrain_updates` long, ending itself with
     `cfg.pretrain_auto`; none for "none"), then "offline_rl" (a multiple of `policy_delay` long, that many updates
     per call)."""
     pre, rl = split_budget(total, 0 if cfg.pretrain == "none" else cfg.pretrain_updates)
-    stages = [Stage("pretrain", pre, auto_stop=cfg.auto_stop(PRETRAIN_MONITOR[cfg.pretrain]))] if pre else []
-    return stages + [Stage("offline_rl", rl - rl % policy_delay, policy_delay)]
+    planned = [Phase("pretrain", steps=pre, auto_stop=cfg.auto_stop(PRETRAIN_MONITOR[cfg.pretrain]))] if pre else []
+    return planned + [Phase(OFFLINE_RL, steps=rl - rl % policy_delay, updates_per_call=policy_delay)]
 
 
 def pretrain_update(mode: str, bc_update: UpdateFn, mc_update: UpdateFn) -> UpdateFn:
     """The single-minibatch update of a joint "pretrain" stage for pre-training mode `mode`."""
     return single({"actor": bc_update, "critic": mc_update, "actor+critic": chain(bc_update, mc_update)}.get(
         mode, bc_update))
-
-
-def stage_phases(stages: list[Stage], updates: dict[str, UpdateFn],
-                 on_start: dict[str, Callable] | None = None) -> list[Phase]:
-    """The phases of `stages`, each with the update function (and start hook) its name is given."""
-    return [Phase(s.name, updates[s.name], s.steps, s.updates_per_call, (on_start or {}).get(s.name), s.auto_stop)
-            for s in stages]
 
 
 def split_budget(total: int, pretrain: int) -> tuple[int, int]:

@@ -16,7 +16,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from offrl_jax.algos.common import AutoStop, Stage, joint_schedule
+from offrl_jax.algos.common import AutoStop, DataNeeds, Phase, joint_phases
 from offrl_jax.losses import BALANCES
 from offrl_jax.nets import INITS, Arch
 
@@ -30,6 +30,11 @@ REPLAY_MODES = ("mix", "append", "online-only")  # `offrl_jax.online.sampling`
 # ignore them); a family adds its own online fields to this set
 ONLINE_FIELDS = frozenset({"replay", "online_mix", "explore_noise", "online_critic_beta", "online_actor_beta_floor"})
 PretrainMode = Literal["none", "actor", "critic", "actor+critic"]
+# The values of the `authors` preset every family shares: the authors' code (AdamJelley/EfficientOfflineRL, a CORL
+# fork) switch by switch; each family's file adds its own, and docs/fidelity.md has the table (what the paper says,
+# what their code and CORL do, our default, the flag).
+AUTHORS_CODE = {"layer_norm_affine": False, "layer_norm_eps": 1e-5, "init": "torch", "balance": "signed",
+                "timeouts": "stop"}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -109,10 +114,16 @@ class Config:
         """The offline updates this variant makes: `offline_updates`, or the study's."""
         return study_updates if self.offline_updates is None else self.offline_updates
 
-    def schedule(self, total_updates: int) -> list[Stage]:
-        """The phases of a run of `total_updates` updates, as plans (no networks needed): pre-training, when there is
-        any, then offline RL; a family that plans otherwise overrides this, and its algorithm's `phases` follows it."""
-        return joint_schedule(self, total_updates)
+    def phases(self, total_updates: int) -> list[Phase]:
+        """The phases of a run of `total_updates` updates, planned once (no networks needed; `Phase.update` None):
+        pre-training, when there is any, then offline RL.  A family that plans otherwise overrides this; its
+        algorithm gives each planned phase its update (`Algorithm.updates`)."""
+        return joint_phases(self, total_updates)
+
+    def needs(self) -> DataNeeds:
+        """What the updates read from the data: by default the device form's fields, every row drawn but, with
+        timeouts "drop", the rows a time limit cut; a family that reads more adds it."""
+        return DataNeeds(cut_rows=self.timeouts != "drop")
 
     def arch(self) -> Arch:
         """The layer-building choices (LayerNorm form, initialisation); a family with a constant hidden bias adds it

@@ -25,16 +25,18 @@ from flax import struct
 
 from offrl_jax import losses as L
 from offrl_jax.algos.common import (
+    OFFLINE_RL,
+    Algo,
+    Algorithm,
     Batch,
+    Family,
     Model,
-    Phase,
     done_flags,
     gradient_step,
     new_model,
     polyak,
     pretrain_update,
     single,
-    stage_phases,
 )
 from offrl_jax.algos.config import Config, require
 from offrl_jax.nets import CriticEnsemble, DeterministicActor, GaussianActor, Value, gaussian_log_prob
@@ -76,7 +78,7 @@ class IQLState:
     value: Model
 
 
-class IQL:
+class IQL(Algorithm):
     def __init__(self, config: IQLConfig, obs_dim: int, act_dim: int, num_transitions: int = 0):
         self.cfg, self.obs_dim, self.act_dim = config, obs_dim, act_dim
         arch, hidden = config.arch(), config.actor_hidden or config.hidden
@@ -108,10 +110,9 @@ class IQL:
         mean, log_std = self.actor.apply(state.actor.params, obs)
         return jnp.clip(mean + jnp.exp(log_std) * jax.random.normal(key, mean.shape), -1.0, 1.0)
 
-    def phases(self, total_updates: int) -> list[Phase]:
-        return stage_phases(self.cfg.schedule(total_updates), {
-            "offline_rl": single(self.rl_update),
-            "pretrain": pretrain_update(self.cfg.pretrain, self.bc_update, self.mc_update)})
+    def updates(self):
+        return {OFFLINE_RL: single(self.rl_update),
+                "pretrain": pretrain_update(self.cfg.pretrain, self.bc_update, self.mc_update)}
 
     def neg_log_lik(self, params, batch: Batch) -> jax.Array:
         """(B,) the actor's per-row loss of the dataset action: squared error, or the Gaussian's -log-likelihood."""
@@ -171,3 +172,14 @@ class IQL:
         state = state.replace(value=value, critic=polyak(critic, cfg.tau))
         state, actor_metrics = self.actor_step(state, batch, advantage, cfg.beta, "actor_loss")
         return state, metrics | critic_metrics | actor_metrics
+
+
+FAMILY = Family(IQLConfig, IQL)
+ALGOS = {"iql": Algo("iql")}
+# IQL's values per env, keyed as `offrl_jax.algos.ENV_DEFAULTS` (CORL's configs/offline/iql/<env>/medium_v2.yaml:
+# expectile 0.7, beta 3 everywhere); hopper's also scales the rewards by 1000 / (max - min episode return)
+ENV_DEFAULTS = {
+    ("iql", "hopper"): {"deterministic": True, "tau": 0.001, "normalize_reward": True},
+    ("iql", "door"): {"expectile": 0.8},  # configs/{offline,finetune}/iql/door/*_v1.yaml (no actor dropout here)
+}
+PRESETS: dict = {}

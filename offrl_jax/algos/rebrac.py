@@ -3,7 +3,7 @@ target, LayerNorm in the critic, a large batch and 3-layer networks.
 
     actor   mean(actor_beta ||pi(s) - a||^2 - Q(s, pi(s)) / sg(mean |Q|)),  Q = min over the critics
     critic  r + gamma (1 - d) (min_i Q'_i(s', a~') - critic_beta ||a~' - a'||^2),  a~' the target actor's smoothed
-            action, a' the dataset's next action (`driver.next_actions`; time-out rows are left out by default, as
+            action, a' the dataset's next action (`data.device.next_actions`; time-out rows are left out by default, as
             CORL's loader does, so a bootstrapped target never lacks one)
 
 One critic update per minibatch; every `policy_delay`-th also updates the actor on the same minibatch, after the
@@ -25,19 +25,22 @@ from flax import struct
 
 from offrl_jax import losses as L
 from offrl_jax.algos.common import (
+    OFFLINE_RL,
+    Algo,
+    Algorithm,
     Batch,
+    DataNeeds,
+    Family,
     Model,
     Phase,
-    Stage,
     bc_step,
     done_flags,
     first,
     gradient_step,
-    joint_schedule,
+    joint_phases,
     new_model,
     polyak,
     pretrain_update,
-    stage_phases,
 )
 from offrl_jax.algos.config import Config, arch_with_bias, require
 from offrl_jax.nets import Arch, CriticEnsemble, DeterministicActor
@@ -87,9 +90,13 @@ class ReBRACConfig(Config):
     def arch(self) -> Arch:
         return arch_with_bias(self)
 
-    def schedule(self, total_updates: int) -> list[Stage]:
+    def phases(self, total_updates: int) -> list[Phase]:
         """Pre-training, then offline RL with the actor updated once every `policy_delay` critic updates."""
-        return joint_schedule(self, total_updates, self.policy_delay)
+        return joint_phases(self, total_updates, self.policy_delay)
+
+    def needs(self) -> DataNeeds:
+        """The critic's penalty reads each row's next action in its episode."""
+        return dataclasses.replace(super().needs(), next_actions=True)
 
 
 @struct.dataclass
@@ -98,9 +105,7 @@ class ReBRACState:
     critic: Model
 
 
-class ReBRAC:
-    uses_next_actions = True  # the driver puts the dataset's next actions in every minibatch
-
+class ReBRAC(Algorithm):
     def __init__(self, config: ReBRACConfig, obs_dim: int, act_dim: int, num_transitions: int = 0):
         self.cfg, self.obs_dim, self.act_dim = config, obs_dim, act_dim
         arch = config.arch()
@@ -126,10 +131,9 @@ class ReBRAC:
         decay = jnp.maximum(cfg.online_actor_beta_floor, 1.0 - progress)
         return {"critic_beta": cfg.online_critic_beta, "actor_beta": cfg.actor_beta * decay}
 
-    def phases(self, total_updates: int) -> list[Phase]:
-        return stage_phases(self.cfg.schedule(total_updates), {
-            "offline_rl": self.rl_update,
-            "pretrain": pretrain_update(self.cfg.pretrain, self.bc_update, self.mc_update)})
+    def updates(self):
+        return {OFFLINE_RL: self.rl_update,
+                "pretrain": pretrain_update(self.cfg.pretrain, self.bc_update, self.mc_update)}
 
     def td_target(self, state: ReBRACState, batch: Batch, key: jax.Array) -> jax.Array:
         cfg = self.cfg
@@ -175,3 +179,18 @@ class ReBRAC:
                 tau = self.cfg.tau
                 state, metrics = state.replace(actor=polyak(actor, tau), critic=polyak(state.critic, tau)), metrics | m
         return state, metrics
+
+
+FAMILY = Family(ReBRACConfig, ReBRAC)
+ALGOS = {"rebrac": Algo("rebrac", without_behaviour={"actor_beta": 0.0, "critic_beta": 0.0})}
+# ReBRAC's published values per env, keyed as `offrl_jax.algos.ENV_DEFAULTS`
+ENV_DEFAULTS = {
+    # the medium datasets' betas (CORL's configs/offline/rebrac/<env>/medium_v2.yaml)
+    ("rebrac", "hopper"): {"actor_beta": 0.01, "critic_beta": 0.01},
+    ("rebrac", "halfcheetah"): {"actor_beta": 0.001, "critic_beta": 0.01},
+    ("rebrac", "walker2d"): {"actor_beta": 0.05, "critic_beta": 0.1},
+    # door (CORL's configs/offline/rebrac/door/<level>_v1.yaml, the same in configs/finetune/rebrac/door/cloned_v1.yaml)
+    ("rebrac", "door"): {"actor_beta": 0.01, "critic_beta": 0.1, "actor_lr": 3e-4, "critic_lr": 3e-4},
+    ("rebrac", "door:human"): {"actor_beta": 0.1},
+}
+PRESETS: dict = {}

@@ -1,8 +1,10 @@
-"""The TD3+BC family (`td3bc`): a deterministic tanh actor and an ensemble of (twin) critics.
+"""The TD3+BC family (`td3bc`): a deterministic tanh actor and an ensemble of (twin) critics.  Its algorithms
+(`ALGOS`):
 
-    BC           = the actor pre-training phase for the whole budget
-    TD3+BC       = TD3 critic (clipped double-Q, smoothed target action) + TD3+BC actor (-lmbda Q + MSE)
-    TD3+BC+CQL   = TD3+BC with the critic loss balanced against the uniform-action CQL penalty (Adroit, Table 3)
+    bc           BC: the actor pre-training phase for the whole budget
+    td3bc        TD3+BC: TD3 critic (clipped double-Q, smoothed target action) + TD3+BC actor (-lmbda Q + MSE)
+    td3bc_cql    TD3+BC+CQL: TD3+BC with the critic loss balanced against the uniform-action CQL penalty (the paper's
+                 hybrid; Adroit, Table 3)
     target='max_mc' replaces the TD target by max(MC, TD) (Q-Transformer, Appendix F)
 
 Pre-training (Alg. 1): `actor` = BC, `critic` = MC regression (optionally lambda-mixed with TD), `actor+critic` = both
@@ -20,24 +22,27 @@ from flax import struct
 
 from offrl_jax import losses as L
 from offrl_jax.algos.common import (
+    OFFLINE_RL,
+    Algo,
+    Algorithm,
     Batch,
+    DataNeeds,
+    Family,
     Model,
     Phase,
-    Stage,
     bc_step,
     done_flags,
     first,
     gradient_step,
-    joint_schedule,
+    joint_phases,
     new_model,
     polyak,
     pretrain_update,
     repeat_obs,
     single,
-    stage_phases,
     uniform_actions,
 )
-from offrl_jax.algos.config import Config, check_cql_fields, require
+from offrl_jax.algos.config import AUTHORS_CODE, Config, check_cql_fields, require
 from offrl_jax.nets import CriticEnsemble, DeterministicActor
 
 
@@ -86,12 +91,16 @@ class TD3BCConfig(Config):
             raise ValueError(f"TD3BCConfig.{what} has no effect on the BC baseline (bc_only: every update is a BC "
                              "update); it takes pretrain = 'actor' only")
 
-    def schedule(self, total_updates: int) -> list[Stage]:
+    def phases(self, total_updates: int) -> list[Phase]:
         """BC for the whole budget (`bc_only`), or pre-training then offline RL with the actor updated once every
         `policy_delay` critic updates."""
         if self.bc_only:
-            return [Stage("actor_pretrain", total_updates)]
-        return joint_schedule(self, total_updates, self.policy_delay)
+            return [Phase("actor_pretrain", steps=total_updates)]
+        return joint_phases(self, total_updates, self.policy_delay)
+
+    def needs(self) -> DataNeeds:
+        """The max(MC, TD) target reads the Monte-Carlo returns in offline RL."""
+        return dataclasses.replace(super().needs(), returns=self.target == "max_mc")
 
 
 @struct.dataclass
@@ -100,7 +109,7 @@ class TD3BCState:
     critic: Model
 
 
-class TD3BC:
+class TD3BC(Algorithm):
     def __init__(self, config: TD3BCConfig, obs_dim: int, act_dim: int, num_transitions: int = 0):
         self.cfg, self.obs_dim, self.act_dim = config, obs_dim, act_dim
         arch = config.arch()
@@ -121,16 +130,9 @@ class TD3BC:
     def act(self, state: TD3BCState, obs: jax.Array) -> jax.Array:
         return self.actor.apply(state.actor.params, obs)
 
-    @property
-    def reads_returns(self) -> bool:
-        """Whether offline RL reads the Monte-Carlo returns (max(MC, TD) targets): online, only rows of ended
-        episodes, whose returns are known, are then drawn."""
-        return self.cfg.target == "max_mc"
-
-    def phases(self, total_updates: int) -> list[Phase]:
-        return stage_phases(self.cfg.schedule(total_updates), {
-            "actor_pretrain": single(self.bc_update), "offline_rl": self.rl_update,
-            "pretrain": pretrain_update(self.cfg.pretrain, self.bc_update, self.mc_update)})
+    def updates(self):
+        return {"actor_pretrain": single(self.bc_update), OFFLINE_RL: self.rl_update,
+                "pretrain": pretrain_update(self.cfg.pretrain, self.bc_update, self.mc_update)}
 
     # --------------------------------------------------------------------------------------------- targets
     def td_target(self, state: TD3BCState, batch: Batch, key: jax.Array) -> jax.Array:
@@ -197,3 +199,32 @@ class TD3BC:
         actor, actor_metrics = gradient_step(state.actor, self.actor_tx, self.actor_loss, state, first(batches, -1))
         tau = self.cfg.tau
         return state.replace(actor=polyak(actor, tau), critic=polyak(state.critic, tau)), metrics | actor_metrics
+
+
+FAMILY = Family(TD3BCConfig, TD3BC)
+ALGOS = {
+    "bc": Algo("td3bc", {"bc_only": True, "pretrain": "actor"}),
+    "td3bc": Algo("td3bc", without_behaviour={"bc_weight": 0.0}),
+    "td3bc_cql": Algo("td3bc", {"cql_weight": 10.0}, without_behaviour={"bc_weight": 0.0, "cql_weight": 0.0}),
+}
+# The paper's per-env values (Section 5, Appendix G Table 3), keyed by (family or algorithm, env) as
+# `offrl_jax.algos.ENV_DEFAULTS`.  Adroit's alpha is the paper's Table 3 value (0.1, pen's 1.0; the authors' door
+# config has 1.0, see docs/fidelity.md), its pre-training the paper's 200k updates.
+ENV_DEFAULTS = {
+    ("td3bc", "hopper"): {"alpha": 10.0},
+    ("td3bc", "halfcheetah"): {"alpha": 20.0, "lam": 0.1},
+    ("td3bc", "walker2d"): {"alpha": 5.0},
+    ("td3bc", "door"): {"alpha": 0.1, "pretrain_updates": 200_000},
+    ("td3bc", "hammer"): {"alpha": 0.1, "pretrain_updates": 200_000},
+    ("td3bc", "relocate"): {"alpha": 0.1, "pretrain_updates": 200_000},
+    ("td3bc", "pen"): {"alpha": 1.0, "pretrain_updates": 200_000},
+    ("td3bc_cql", "pen"): {"cql_weight": 1.0},
+}
+# "published": TD3+BC's own published alpha (Fujimoto & Gu 2021), the main job's default (experiments.mujoco_medium):
+# with it the from-scratch baseline learns on our data; with the paper's per-env alphas (hopper 10) it does not.
+# "authors": the authors' code switch by switch (`AUTHORS_CODE`, docs/fidelity.md).
+PRESETS = {
+    "published": {"td3bc": {"alpha": 2.5}},
+    "authors": {"td3bc": AUTHORS_CODE | {"actor_hidden": (256, 256, 256), "q_scale_eps": 0.0,
+                                         "bc_target_updates": False}},
+}

@@ -38,7 +38,8 @@ from offrl_jax.app.outputs import (
     studies_json,
 )
 from offrl_jax.data import catalogue
-from offrl_jax.data.dataset import DatasetError, rows_without_timeouts
+from offrl_jax.data.dataset import DatasetError
+from offrl_jax.data.device import too_few_rows
 from offrl_jax.run.provenance import fingerprint, recorded_command, recorded_data
 from offrl_jax.run.resume import check_resume, edited_resolved
 from offrl_jax.run.runner import Diverged, run_study
@@ -259,14 +260,10 @@ class Command:
             if study.batch_size > len(ds):
                 raise UsageError(f"--batch-size {study.batch_size} is larger than the dataset ({len(ds):,} "
                                  f"transitions of {study.dataset})")
-            # timeouts = "drop": time-out rows are never sampled (`offrl_jax.driver.Driver`), so only the others count
-            if any(study.config(v.label).timeouts == "drop" for v in study.variants):
-                rows = len(rows_without_timeouts(ds.timeouts))
-                if study.batch_size > rows:
-                    lower = ", or a smaller --batch-size" if rows else ""
-                    raise UsageError(f"{study.dataset}: {rows:,} of its {len(ds):,} transitions remain once its "
-                                     f"time-out rows are dropped (timeouts = 'drop'), fewer than --batch-size "
-                                     f"{study.batch_size}; keep them with --timeouts bootstrap or stop{lower}")
+            # the rows the variants' updates may draw (`offrl_jax.data.device.for_updates`)
+            if problem := too_few_rows(ds, [study.config(v.label).needs() for v in study.variants],
+                                       study.batch_size):
+                raise UsageError(f"{study.dataset}: {problem}")
         return data
 
     # 5. check a resume (every study's checkpoints must be its own) or a replay, before anything is written

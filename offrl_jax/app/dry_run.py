@@ -39,7 +39,7 @@ def describe(studies: list[Study]) -> str:
             config = study.config(v.label)
             phases = ", ".join(f"{s.name} {s.steps:,}" + (f" ({s.updates_per_call} per call)" if s.updates_per_call > 1
                                                           else "") + (" (ends itself, at most)" if s.auto_stop else "")
-                               for s in config.schedule(config.budget(study.updates)))
+                               for s in config.phases(config.budget(study.updates)))
             lines += [f"  variant {v.label}: {v.algo}" + (f", preset {v.preset}" if v.preset else ""),
                       f"    phases: {phases}"]
             lines += [f"    {name} = {json.dumps(value, default=list)}  ({sources[v.label][name]})"

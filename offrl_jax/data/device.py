@@ -9,17 +9,21 @@ from __future__ import annotations
 
 import dataclasses
 import threading
+from typing import TYPE_CHECKING
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from offrl_jax.data.dataset import Dataset, normalize_obs
+from offrl_jax.data.dataset import Dataset, normalize_obs, rows_without_timeouts
 from offrl_jax.data.returns import returns_to_go
 
+if TYPE_CHECKING:
+    from offrl_jax.algos.common import DataNeeds
+
 DATA_FIELDS = ("observations", "actions", "rewards", "next_observations", "terminals", "timeouts", "returns")
-# beyond the device form, on the device only for an algorithm that reads them (`uses_next_actions`: ReBRAC's critic
-# penalty; `offrl_jax.driver.next_actions`)
+# beyond the device form, on the device only for an algorithm that reads them (`DataNeeds.next_actions`: ReBRAC's
+# critic penalty; `next_actions`)
 OPTIONAL_FIELDS = ("next_actions",)
 
 
@@ -49,6 +53,41 @@ def device_data(ds: Dataset, gamma: float, timeout_tail: bool = True, normalize_
     arrays = {k: jnp.asarray(v, jnp.float32) for k, v in arrays.items()}
     arrays["returns"] = returns_to_go(arrays["rewards"], arrays["terminals"], arrays["timeouts"], gamma, timeout_tail)
     return DeviceData(arrays, mean, std)
+
+
+def next_actions(actions: jax.Array, terminals: jax.Array, timeouts: jax.Array) -> jax.Array:
+    """(T, A) the dataset's action at the next row of the same episode.  The last row of an episode has none: its
+    own action stands in (at a terminal the TD target does not bootstrap, so it is never used; at a time-out it is,
+    unless timeouts="drop" leaves the row out, as CORL's ReBRAC loader does; and at the dataset's last row)."""
+    ends = jnp.maximum(terminals, timeouts).at[-1].set(1.0)
+    following = jnp.concatenate([actions[1:], actions[-1:]])
+    return jnp.where(ends[:, None] > 0, actions, following)
+
+
+def for_updates(arrays: dict[str, jax.Array], needs: DataNeeds) -> dict[str, jax.Array]:
+    """A device form's `arrays` with what an algorithm's updates read besides (`needs`, its config's `needs()`):
+    `next_actions` where it reads them, and `rows` (the (K,) rows that may be drawn) where some are never drawn."""
+    if needs.next_actions and "next_actions" not in arrays:
+        arrays = arrays | {"next_actions": next_actions(arrays["actions"], arrays["terminals"], arrays["timeouts"])}
+    if not needs.cut_rows:  # CORL's loader: time-out rows are never sampled
+        rows = rows_without_timeouts(arrays["timeouts"])
+        if not len(rows):
+            raise ValueError("every transition is a time-out row: timeouts = 'drop' leaves nothing to sample")
+        arrays = arrays | {"rows": jnp.asarray(rows, jnp.int32)}
+    return arrays
+
+
+def too_few_rows(ds: Dataset, needs: list[DataNeeds], batch_size: int) -> str | None:
+    """Why `batch_size` rows cannot be drawn from `ds` for algorithms with these `needs` (None: they can): where
+    time-out rows are never drawn, only the others count."""
+    if all(n.cut_rows for n in needs):
+        return None
+    rows = len(rows_without_timeouts(ds.timeouts))
+    if batch_size <= rows:
+        return None
+    lower = ", or a smaller --batch-size" if rows else ""
+    return (f"{rows:,} of its {len(ds):,} transitions remain once its time-out rows are dropped (timeouts = 'drop'), "
+            f"fewer than --batch-size {batch_size}; keep them with --timeouts bootstrap or stop{lower}")
 
 
 class DeviceForms:

@@ -52,9 +52,9 @@ class OnlineConfig:
         return rows
 
     def check(self, label: str, last) -> None:
-        """Raise ValueError unless variant `label`, whose last planned stage or phase is `last`, can go on online:
+        """Raise ValueError unless variant `label`, whose last (planned) phase is `last`, can go on online:
         it ends in offline RL (there is a critic to fine-tune), and each block's updates fill whole update calls."""
-        if last.name != "offline_rl":
+        if last.pretraining:
             raise ValueError(f"variant {label!r} has no offline-RL phase to fine-tune online (behaviour cloning "
                              "alone has no critic)")
         if (self.block * self.utd) % last.updates_per_call:

@@ -8,10 +8,11 @@ the Monte-Carlo returns of the episodes it ends; then K * utd updates run as one
 inside it from the dataset and the member's buffer as the family's `replay` says (`offrl_jax.online.sampling`).
 The first `warmup` env steps only collect.  Nothing is recompiled per block.
 
-The update is the family's offline-RL update, with the online values a family declares (`online_values(progress)`:
-ReBRAC's penalties, as CORL fine-tunes it) recomputed at every update from the online progress.  Randomness stays a
-pure function of (seed, index): update u of the run uses fold_in(key, u) as offline, the exploration noise of env
-step t fold_in(key(seed, EXPLORE), t), and every episode's reset its seed and start step (`online.envs.reset_seed`).
+The update is the family's offline-RL update, with the online values a family declares
+(`Algorithm.online_values(progress)`: a penalty that decays over the online phase, say) recomputed at every update
+from the online progress.  Randomness stays a pure function of (seed, index): update u of the run uses
+fold_in(key, u) as offline, the exploration noise of env step t fold_in(key(seed, EXPLORE), t), and every episode's
+reset its seed and start step (`online.envs.reset_seed`).
 """
 from __future__ import annotations
 
@@ -49,9 +50,8 @@ def online_phase(algo: Any, offline_updates: int, online: OnlineConfig
 
     def phase_at(hparams: dict | None, update: jax.Array) -> Phase:
         now = algo if not hparams else with_hparams(algo, **hparams)
-        values = getattr(now, "online_values", None)
-        if values is not None:
-            now = with_hparams(now, **values((update - offline_updates) / updates))
+        if values := now.online_values((update - offline_updates) / updates):
+            now = with_hparams(now, **values)
         return dataclasses.replace(now.phases(offline_updates)[-1], name="online", steps=updates)
 
     return phase, phase_at
@@ -80,7 +80,7 @@ def run_online(driver: Driver, algo: Any, online: OnlineConfig, env: str, form: 
     checkpoint's, goes on from its env step as if the run had not stopped."""
     layout, members, cfg = driver.layout, driver.members, algo.cfg
     phase, phase_at = online_phase(algo, offline_updates, online)
-    replay = Replay(cfg.replay, cfg.online_mix, ended_only=getattr(algo, "reads_returns", False))
+    replay = Replay(cfg.replay, cfg.online_mix, ended_only=cfg.needs().returns)
     calls = online.block * online.utd // phase.updates_per_call
     draw = lambda key, data, buffer, shape: sample(key, replay, data, buffer, shape)  # noqa: E731
     fn = driver.chunk_fn(phase, calls, draw=draw, phase_at=phase_at)
@@ -98,8 +98,7 @@ def run_online(driver: Driver, algo: Any, online: OnlineConfig, env: str, form: 
             envs.restore(saved["envs"])
             update = int(json.loads(saved["key"])["update"])
         buffer = layout.place(buffer)
-        explore = exploration_policy(algo.act, form.obs_mean, form.obs_std, cfg.explore_noise,
-                                     getattr(algo, "explore", None))
+        explore = exploration_policy(algo.act, form.obs_mean, form.obs_std, cfg.explore_noise, algo.explore)
         keys = exploration_keys(members)
         states = layout.place(states)
         parts, episodes, blocks, steps_done = [], [], [], 0

@@ -33,6 +33,7 @@ import jax
 import numpy as np
 
 from offrl_jax.algos import make_algorithm
+from offrl_jax.algos.common import OFFLINE_RL
 from offrl_jax.data.dataset import Dataset
 from offrl_jax.data.device import DeviceData, DeviceForms, device_data
 from offrl_jax.driver import Chunk, Driver
@@ -171,7 +172,7 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
     driver = Driver(algo, data.arrays, seeds, study.batch_size, sweep=sweep)
     policy = make_policy(algo.act, data.obs_mean, data.obs_std)
     phases = algo.phases(config.budget(study.updates))
-    pretrain_end = sum(p.steps for p in phases if p.name != "offline_rl")
+    pretrain_end = sum(p.steps for p in phases if p.pretraining)
     last_update = sum(p.steps for p in phases)  # TD3 trims an odd budget to its 2-update call grid
     name = " + ".join(labels)
     ckpt_path = checkpoint_path(out_dir, group)
@@ -240,7 +241,7 @@ def _run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: 
     def chunks():
         if last_update == 0 and not rows:  # no offline phase (an online-only arm): evaluate the initial policy
             handover.update(states=driver.init(), seconds=0.0)
-            yield Chunk("offline_rl", 0, handover["states"], {"finite": np.ones(len(member_names), bool)}, 0.0, 0.0)
+            yield Chunk(OFFLINE_RL, 0, handover["states"], {"finite": np.ones(len(member_names), bool)}, 0.0, 0.0)
         for chunk in driver.run(phases, study.eval_every, states, start, seconds, ended, last_metrics, on_slice):
             handover.update(states=chunk.states, seconds=chunk.seconds)
             yield chunk

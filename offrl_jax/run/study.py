@@ -145,10 +145,10 @@ class Study:
         resolved = {v.label: v.resolve(self.env, self.dataset) for v in self.variants}
         configs = {label: r.config for label, r in resolved.items()}
         for label, config in configs.items():
-            stages = config.schedule(config.budget(self.updates))
-            check_call_grid(stages, self.eval_every)
+            planned = config.phases(config.budget(self.updates))
+            check_call_grid(planned, self.eval_every)
             if self.online is not None:
-                self.online.check(label, stages[-1])
+                self.online.check(label, planned[-1])
                 self.online.rows(horizon)  # a buffer too small for the env's episodes: refused before any training
                 if (total := config.budget(self.updates) + self.online.updates()) >= 2**31:
                     raise ValueError(f"variant {label!r}: its offline and online updates ({total:,}) are past what "
