@@ -190,7 +190,7 @@ def test_help_states_the_default_the_study_runs(module):
                 checked += 1
     assert checked > 0
     if module == "experiments.mujoco_medium":
-        assert stated["alpha"] == (None, [(None, None, 2.5)]) and "Default: published" in shown.stdout
+        assert stated["alpha"] == (None, [(None, None, 2.5)]) and "Default: published" in " ".join(shown.stdout.split())
     if module == "experiments.ablation":  # the paper's per-env alphas, hopper's first
         assert stated["alpha"] == ("hopper", [(None, None, 10.0)])
         assert "Default: none" in " ".join(shown.stdout.split())

@@ -180,7 +180,7 @@ def test_log_alpha_bound_clips_the_temperature_used_in_offline_rl_not_the_parame
 
 def test_authors_pretraining_schedule_10k_soft_bc_then_11k_critic():
     # their loop: soft BC while epoch < 20 // 2, the critic while epoch <= 20 (epochs of 1k updates), EDAC after
-    plan = lambda cfg, total: [(s.name, s.steps) for s in cfg.schedule(total)]  # noqa: E731
+    plan = lambda cfg, total: [(s.name, s.steps) for s in cfg.phases(total)]  # noqa: E731
     authors = make_config("edac", "hopper", preset="authors")
     assert plan(authors, 3_000_000) == [("actor_pretrain", 10_000), ("critic_pretrain", 11_000),
                                         ("offline_rl", 2_979_000)]
@@ -249,7 +249,7 @@ def test_figure2_authors_preset_gives_the_authors_edac_schedule():
         study = edac(["--preset", "authors"])[env]
         cfg = study.config("pretrained")
         assert (study.updates, cfg.num_critics, cfg.eta) == (budget, critics, 1.0)
-        assert [(s.name, s.steps) for s in cfg.schedule(study.updates)][:2] == [("actor_pretrain", 10_000),
+        assert [(s.name, s.steps) for s in cfg.phases(study.updates)][:2] == [("actor_pretrain", 10_000),
                                                                                 ("critic_pretrain", 11_000)]
         assert (cfg.timeouts, cfg.soft_entropy_at, cfg.log_alpha_bound) == ("stop", "observations", 10.0)
     # flags still win; without the preset, the CPU-sized study
