@@ -102,19 +102,16 @@ def check_online_flags(study: Study, values: dict) -> Study:
 
 
 def samples(config, env: str) -> bool:
-    """Whether a variant's actor explores with a sample (its family's `explore` gives an action), traced abstractly:
-    nothing is computed."""
+    """Whether a variant's actor explores with a sample (its family's `Algorithm.explore` gives an action, not the
+    default None), traced abstractly: nothing is computed."""
     import jax
     import jax.numpy as jnp
 
     spec = get_env_spec(env)
     algo = make_algorithm(config, spec.obs_dim, spec.act_dim, 1)
-    explore = getattr(algo, "explore", None)
-    if explore is None:
-        return False
     state = jax.eval_shape(algo.init, jax.random.PRNGKey(0))
     obs = jax.ShapeDtypeStruct((spec.obs_dim,), jnp.float32)
-    return jax.eval_shape(explore, state, obs, jax.random.PRNGKey(0)) is not None
+    return jax.eval_shape(algo.explore, state, obs, jax.random.PRNGKey(0)) is not None
 
 
 def online_config(args) -> OnlineConfig:
