@@ -14,6 +14,10 @@
 
 Expected failures (bad flags, bad data, an unwritable place, divergence) print one line, `error: ...`, and exit 2
 (3 for divergence); `OFFRL_JAX_DEBUG=1` re-raises them with the traceback instead.
+
+Over 400 lines for a stated reason: the seven steps share one `Command`'s state (the studies, the claimed directory,
+the lock, what an --overwrite set aside) and its clean-up on every exit path; split, each step would take and return
+that state and the clean-up would be spread over files. The step bodies call out to app/ and run/ for their parts.
 """
 from __future__ import annotations
 

@@ -8,6 +8,8 @@ Formats:
   * Adroit demonstrations (`read_door_npz`): concatenated trajectories plus `episode_lengths` (E,).
 
 Every reader ends with `validate`, which raises `DatasetError` with a one-line message "<path>: <problem>".
+One file for the three formats (just over 400 lines): they share `validate` and the path and key checks, and a
+reader looking for how a file on disk becomes a `Dataset` finds every format here.
 """
 from __future__ import annotations
 
