@@ -113,6 +113,7 @@ def test_its_online_rl_arm_is_awac_itself_from_scratch():
     assert set(arms) == {"pretrained", "scratch", "pretrain-only", "online-rl"}
     assert (arms["online-rl"].offline_updates, arms["online-rl"].pretrain) == (0, "none")
     assert arms["online-rl"].awac_lambda == arms["scratch"].awac_lambda == 0.3333
+    assert finetune.samples(arms["scratch"], "hopper")  # a sample explores: --explore-noise is refused
 
 
 def test_pretrained_awac_runs_through_the_runner(tmp_path, tiny_dataset):
