@@ -1,6 +1,6 @@
 """Figure 2: hopper, halfcheetah, walker2d medium; TD3+BC and EDAC, each with and without pre-training (and, beyond
-the paper, ReBRAC, IQL and AWAC with `--algos rebrac iql awac`: TD3+BC's budget, ReBRAC at its published batch of 1024 unless
---batch-size sets another than the default 256).
+the paper, ReBRAC, IQL and AWAC with `--algos rebrac iql awac`: TD3+BC's budget, ReBRAC at its published batch of
+1024 unless --batch-size sets another than the default 256).
 
 CPU-sized defaults (the paper runs 1M updates on a GPU), 3 seeds: TD3+BC 30k updates (10k pre-training),
 evaluation every 2.5k (~25 min per env on 2 cores); EDAC with 10 critics for 16k updates (12k pre-training: 3k soft

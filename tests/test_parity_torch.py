@@ -1,8 +1,8 @@
 """Float64 parity: our TD3+BC, EDAC, ReBRAC, IQL and AWAC updates equal a PyTorch reference update
 (`tests/torch_reference.py`, written the way CORL writes them, from Fujimoto & Gu 2021, An et al. 2021, Tarasov et
-al. 2023, Kostrikov et al. 2022 and Nair et al. 2020) to rounding.  ReBRAC and IQL are built from their own per-env defaults (their
-LayerNorm and epsilon as they ship), with the target-policy noise off; each test also checks that every network
-moved, so agreement is not two sides standing still.
+al. 2023, Kostrikov et al. 2022 and Nair et al. 2020) to rounding.  ReBRAC, IQL and AWAC are built from their own
+per-env defaults (their LayerNorm and epsilon as they ship), with ReBRAC's target-policy noise off; each test also
+checks that every network moved, so agreement is not two sides standing still.
 
 Each test builds our algorithm with `make_config(..., preset="authors")` (torch's LayerNorm epsilon 1e-5, the authors'
 LayerNorm without affine parameters, lambda = alpha / mean|Q| with no epsilon, ...), copies its initial parameters
@@ -39,8 +39,7 @@ import jax.numpy as jnp  # noqa: E402
 from torch import nn  # noqa: E402
 
 from offrl_jax import nets  # noqa: E402
-from offrl_jax.algos import awac  # noqa: E402
-from offrl_jax.algos import make_algorithm, make_config  # noqa: E402
+from offrl_jax.algos import awac, make_algorithm, make_config  # noqa: E402
 from tests import torch_reference as ref  # noqa: E402
 
 pytestmark = pytest.mark.parity

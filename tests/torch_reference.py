@@ -1,6 +1,7 @@
 """Reference updates written the way PyTorch users write them, after CORL's td3_bc.py, edac.py, rebrac.py, iql.py and
-finetune/awac.py, from the published equations: the other side of tests/test_parity_torch.py, which checks in float64 that
-our JAX updates equal these.  `benchmarks.pytorch` also times the TD3+BC and EDAC ones against the JAX driver.
+finetune/awac.py, from the published equations: the other side of tests/test_parity_torch.py, which checks in
+float64 that our JAX updates equal these.  `benchmarks.pytorch` also times the TD3+BC and EDAC ones against the JAX
+driver.
 
 Defaults are the benchmark's shapes: hopper (obs 11, act 3), 100k random transitions, batch 256, default sizes
 (TD3+BC: 2x256 + LayerNorm, twin critics, policy delay 2; EDAC: 3x256 + LayerNorm, N = 10 vectorised critics,
