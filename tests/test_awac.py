@@ -74,6 +74,18 @@ def test_one_update_is_the_critics_then_the_actor_under_them_then_the_targets():
             np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-6)
 
 
+def test_a_swept_lambda_computes_what_each_value_does():
+    from offrl_jax.algos.common import with_hparams
+
+    algo = make_algorithm(make_config("awac", "hopper", hidden=(8, 8)), 3, 2, 0)
+    state, batch, key = algo.init(jax.random.PRNGKey(1)), _batch(), jax.random.PRNGKey(2)
+    swept = jax.vmap(lambda lam: with_hparams(algo, awac_lambda=lam).rl_update(state, batch, key)[1]["actor_loss"])
+    each = [algo.rl_update(state, batch, key)[1]["actor_loss"] for algo in (
+        make_algorithm(make_config("awac", "hopper", hidden=(8, 8), awac_lambda=lam), 3, 2, 0) for lam in (0.1, 1.0))]
+    np.testing.assert_allclose(swept(jnp.array([0.1, 1.0])), each, rtol=1e-5)
+    assert not np.isclose(each[0], each[1])
+
+
 def test_pretraining_is_gaussian_bc_and_both_critics_on_the_returns():
     cfg = make_config("awac", "hopper", hidden=(8, 8), pretrain="actor+critic", pretrain_updates=100)
     assert [(p.name, p.steps) for p in cfg.phases(300)] == [("pretrain", 100), ("offline_rl", 200)]

@@ -493,7 +493,8 @@ def awac_pairs(state, agent: ref.AWAC):
     return pairs
 
 
-def test_awac_rl_update_matches_torch(monkeypatch):
+@pytest.mark.parametrize("awac_lambda", [None, 0.003])  # hopper's 0.3333: no weight clipped at first; 0.003: 1 in 6
+def test_awac_rl_update_matches_torch(awac_lambda, monkeypatch):
     """10 AWAC updates (the twin critics on a sampled next action without entropy, then the actor's exp(A / lambda)
     weighted likelihood with A against a sampled action under the updated critics, then the targets), with the
     policy's two draws per update recorded on our side and fed to CORL's."""
@@ -501,8 +502,9 @@ def test_awac_rl_update_matches_torch(monkeypatch):
     monkeypatch.setattr(awac, "jax", recorder)
     data = dataset()
     with float64():
-        cfg = make_config("awac", "hopper", hidden=(32, 32, 32))
-        assert (cfg.awac_lambda, cfg.max_weight, cfg.actor_lr, cfg.critic_lr) == (0.3333, 100.0, 3e-4, 3e-4)
+        cfg = make_config("awac", "hopper", hidden=(32, 32, 32), awac_lambda=awac_lambda)
+        assert (cfg.awac_lambda, cfg.max_weight, cfg.actor_lr, cfg.critic_lr) == (
+            awac_lambda or 0.3333, 100.0, 3e-4, 3e-4)
         algo = make_algorithm(cfg, OBS, ACT, ROWS)
         state = to64(algo.init(jax.random.key(0)))
         agent = ref.AWAC(cfg.awac_lambda, cfg.gamma, cfg.tau, cfg.actor_lr, OBS, ACT, cfg.hidden, cfg.max_weight)
@@ -525,5 +527,5 @@ def test_awac_rl_update_matches_torch(monkeypatch):
             state, _ = phase.update(state, stack([b]), jax.random.key(i))  # eagerly: the noise is recorded
             agent.update(torch_batch(b, cfg.timeouts), recorder.take(2))  # TD target's, then the actor's
         assert not recorder.draws
-        compare("awac rl", awac_pairs(state, agent))
+        compare(f"awac rl (lambda {cfg.awac_lambda})", awac_pairs(state, agent))
         assert_moved(before, awac_pairs(state, agent), ("actor", "critic", "target.critic"))
