@@ -201,11 +201,19 @@ def rebrac_actor_loss(q: jax.Array, pred_actions: jax.Array, actions: jax.Array,
 
 
 def awr_actor_loss(neg_log_lik: jax.Array, advantage: jax.Array, beta: float, max_weight: float = 100.0) -> jax.Array:
-    """IQL's advantage-weighted regression: mean(min(exp(beta sg(A)), max_weight) * nll), nll the per-row negative
-    log-likelihood of the dataset action (or its squared error, for a deterministic actor).  (B,), (B,) -> ().
+    """IQL's and AWAC's (beta = 1 / lambda) advantage-weighted regression: mean(min(exp(beta sg(A)), max_weight) *
+    nll), nll the per-row negative log-likelihood of the dataset action (or its squared error, for a deterministic
+    actor).  (B,), (B,) -> ().
     beta = 0 weighs every row 1: behaviour cloning."""
     assert_shapes(neg_log_lik=(neg_log_lik, "B"), advantage=(advantage, "B"))
     return jnp.mean(jnp.minimum(jnp.exp(beta * sg(advantage)), max_weight) * neg_log_lik)
+
+
+def awac_advantage(q_data: jax.Array, q_pi: jax.Array) -> jax.Array:
+    """AWAC's advantage, a constant of the actor loss: sg(min_i Q_i(s, a) - min_i Q_i(s, a~)), a the data's action,
+    a~ the policy's (CORL: a clipped sample).  q_data, q_pi: (N, B) -> (B,)."""
+    assert_shapes(q_data=(q_data, "NB"), q_pi=(q_pi, "NB"))
+    return sg(jnp.min(q_data, axis=0) - jnp.min(q_pi, axis=0))
 
 
 def sac_actor_loss(q: jax.Array, log_prob: jax.Array, alpha: jax.Array) -> jax.Array:

@@ -159,18 +159,21 @@ def sample_tanh_gaussian(key: jax.Array, mean: jax.Array, log_std: jax.Array,
 
 
 class GaussianActor(nn.Module):
-    """IQL's Gaussian policy: obs (..., obs_dim) -> (mean, log_std), mean = tanh(MLP(obs)) (..., act_dim), log_std a
-    learned state-independent (act_dim,) vector clipped to `log_std_bounds`; it acts with the mean."""
+    """IQL's and AWAC's Gaussian policy: obs (..., obs_dim) -> (mean, log_std), mean = tanh(MLP(obs)) (..., act_dim)
+    (IQL; `tanh_mean` False: MLP(obs) itself, AWAC's), log_std a learned state-independent (act_dim,) vector clipped
+    to `log_std_bounds`; it acts with the mean."""
 
     act_dim: int
     hidden: Sequence[int] = (256, 256)
     layer_norm: bool = False
     arch: Arch = Arch()
     log_std_bounds: tuple[float, float] = (-20.0, 2.0)
+    tanh_mean: bool = True
 
     @nn.compact
     def __call__(self, obs: jax.Array) -> tuple[jax.Array, jax.Array]:
-        mean = jnp.tanh(MLP(self.hidden, self.act_dim, self.layer_norm, arch=self.arch)(obs))
+        mean = MLP(self.hidden, self.act_dim, self.layer_norm, arch=self.arch)(obs)
+        mean = jnp.tanh(mean) if self.tanh_mean else mean
         log_std = self.param("log_std", nn.initializers.zeros, (self.act_dim,))
         return mean, jnp.clip(log_std, *self.log_std_bounds)
 

@@ -237,6 +237,16 @@ def test_awr_actor_loss_weights_and_clip():
     A(jax.grad(lambda a: L.awr_actor_loss(nll, a, 2.0))(adv), 0.0)  # the advantage is a constant
 
 
+def test_awac_advantage_is_min_q_of_the_data_action_less_min_q_of_the_policy_action():
+    # q_data rows (1, 4) and (3, 2): mins (1, 2); q_pi rows (2, 0) and (5, 1): mins (2, 0); A = (1 - 2, 2 - 0) = (-1, 2)
+    q_data, q_pi = jnp.array([[1.0, 4.0], [3.0, 2.0]]), jnp.array([[2.0, 0.0], [5.0, 1.0]])
+    A(L.awac_advantage(q_data, q_pi), [-1.0, 2.0])
+    # AWAC's weights exp(A / lambda) at lambda 0.5: (e^-2, e^4), neither clipped at 100
+    A(L.awr_actor_loss(jnp.ones(2), L.awac_advantage(q_data, q_pi), 1 / 0.5), (np.exp(-2.0) + np.exp(4.0)) / 2,
+      rtol=1e-6)
+    A(jax.grad(lambda q: jnp.sum(L.awac_advantage(q, q_pi)))(q_data), 0.0)  # a constant of the actor loss
+
+
 def test_gaussian_log_prob():
     from offrl_jax.nets import gaussian_log_prob
 
@@ -252,6 +262,7 @@ Z = jnp.zeros
     ("q", lambda: L.td3bc_actor_loss(Z((2, 5)), Z((5, 3)), Z((5, 3)), 2.5)),  # all critics' Q
     ("actions", lambda: L.bc_loss(Z((5, 3)), Z((5, 1)))),
     ("advantage", lambda: L.awr_actor_loss(Z(5), Z((5, 1)), 3.0)),
+    ("q_pi", lambda: L.awac_advantage(Z((2, 5)), Z((2, 5, 1)))),
     ("pred_actions", lambda: L.rebrac_actor_loss(Z(4), Z((5, 3)), Z((5, 3)), 0.1)),
     ("log_prob_data", lambda: L.soft_bc_loss(Z(5), Z((5, 1)), 1.0)),
     ("next_value", lambda: L.td_target(Z(5), Z(5), Z((5, 1)), 0.99)),  # V(s') (B, 1): a (B, B) target

@@ -1,8 +1,8 @@
-"""Float64 parity: our TD3+BC, EDAC, ReBRAC and IQL updates equal a PyTorch reference update
+"""Float64 parity: our TD3+BC, EDAC, ReBRAC, IQL and AWAC updates equal a PyTorch reference update
 (`tests/torch_reference.py`, written the way CORL writes them, from Fujimoto & Gu 2021, An et al. 2021, Tarasov et
-al. 2023 and Kostrikov et al. 2022) to rounding.  ReBRAC and IQL are built from their own per-env defaults (their
-LayerNorm and epsilon as they ship), with the target-policy noise off; each test also checks that every network
-moved, so agreement is not two sides standing still.
+al. 2023, Kostrikov et al. 2022 and Nair et al. 2020) to rounding.  ReBRAC, IQL and AWAC are built from their own
+per-env defaults (their LayerNorm and epsilon as they ship), with ReBRAC's target-policy noise off; each test also
+checks that every network moved, so agreement is not two sides standing still.
 
 Each test builds our algorithm with `make_config(..., preset="authors")` (torch's LayerNorm epsilon 1e-5, the authors'
 LayerNorm without affine parameters, lambda = alpha / mean|Q| with no epsilon, ...), copies its initial parameters
@@ -39,7 +39,7 @@ import jax.numpy as jnp  # noqa: E402
 from torch import nn  # noqa: E402
 
 from offrl_jax import nets  # noqa: E402
-from offrl_jax.algos import make_algorithm, make_config  # noqa: E402
+from offrl_jax.algos import awac, make_algorithm, make_config  # noqa: E402
 from tests import torch_reference as ref  # noqa: E402
 
 pytestmark = pytest.mark.parity
@@ -480,3 +480,52 @@ def test_iql_rl_update_matches_torch(env):
             agent.update(torch_batch(b, "stop"))
         compare(f"iql rl ({env})", iql_pairs(state, agent))
         assert_moved(before, iql_pairs(state, agent), ("actor", "critic", "target.critic", "value"))
+
+
+# ------------------------------------------------------------------------------------------------------- AWAC
+
+
+def awac_pairs(state, agent: ref.AWAC):
+    pairs = mlp_pairs("actor", state.actor.params["params"]["MLP_0"], torch_layers(agent.actor, nn.Linear), [])
+    pairs.append(("actor.log_std", np.asarray(state.actor.params["params"]["log_std"]), agent.actor._log_std))
+    pairs += critic_pairs("critic", state.critic.params, agent.critics)
+    pairs += critic_pairs("target.critic", state.critic.target, agent.critics_target)
+    return pairs
+
+
+@pytest.mark.parametrize("awac_lambda", [None, 0.003])  # hopper's 0.3333: no weight clipped at first; 0.003: 1 in 6
+def test_awac_rl_update_matches_torch(awac_lambda, monkeypatch):
+    """10 AWAC updates (the twin critics on a sampled next action without entropy, then the actor's exp(A / lambda)
+    weighted likelihood with A against a sampled action under the updated critics, then the targets), with the
+    policy's two draws per update recorded on our side and fed to CORL's."""
+    recorder = _NoiseRecorder()
+    monkeypatch.setattr(awac, "jax", recorder)
+    data = dataset()
+    with float64():
+        cfg = make_config("awac", "hopper", hidden=(32, 32, 32), awac_lambda=awac_lambda)
+        assert (cfg.awac_lambda, cfg.max_weight, cfg.actor_lr, cfg.critic_lr) == (
+            awac_lambda or 0.3333, 100.0, 3e-4, 3e-4)
+        algo = make_algorithm(cfg, OBS, ACT, ROWS)
+        state = to64(algo.init(jax.random.key(0)))
+        agent = ref.AWAC(cfg.awac_lambda, cfg.gamma, cfg.tau, cfg.actor_lr, OBS, ACT, cfg.hidden, cfg.max_weight)
+        log_std = np.linspace(-0.5, 0.3, ACT)  # away from 0, so that the gradient through it is exercised
+        params = {"params": state.actor.params["params"] | {"log_std": jnp.asarray(log_std)}}
+        state = state.replace(actor=state.actor.replace(params=params))
+        copy_in(awac_pairs(state, agent))
+        before = awac_pairs(state, agent)
+        b = minibatches(data, 1, seed=7)[0]
+        s, a = torch_batch(b, cfg.timeouts)[:2]
+        with torch.no_grad():
+            ours_q = algo.critic.apply(state.critic.params, jnp.asarray(b["observations"]), jnp.asarray(b["actions"]))
+            np.testing.assert_allclose(np.asarray(ours_q), ref.ensemble_q(agent.critics, s, a).numpy(), rtol=0,
+                                       atol=1e-12)
+            mean, _ = algo.actor.apply(state.actor.params, jnp.asarray(b["observations"]))
+            np.testing.assert_allclose(np.asarray(mean), agent.actor._get_policy(s).loc.numpy(), rtol=0, atol=1e-12)
+        phase = algo.phases(20_000)[-1]
+        assert phase.name == "offline_rl" and phase.updates_per_call == 1
+        for i, b in enumerate(minibatches(data, 10)):
+            state, _ = phase.update(state, stack([b]), jax.random.key(i))  # eagerly: the noise is recorded
+            agent.update(torch_batch(b, cfg.timeouts), recorder.take(2))  # TD target's, then the actor's
+        assert not recorder.draws
+        compare(f"awac rl (lambda {cfg.awac_lambda})", awac_pairs(state, agent))
+        assert_moved(before, awac_pairs(state, agent), ("actor", "critic", "target.critic"))

@@ -62,6 +62,13 @@ def test_figure2_beyond_the_paper_rebrac_and_iql():
     assert given[0].batch_size == 512
 
 
+def test_figure2_runs_awac_with_its_twin_critics_whatever_edacs_ensemble():
+    (awac,) = build(figure2, ["--algos", "awac", "--envs", "hopper", "--num-critics", "5"])
+    assert awac.name == "figure2-hopper-awac" and awac.batch_size == 256
+    assert [v.label for v in awac.variants] == ["pretrained", "scratch"]
+    assert awac.config("pretrained").num_critics == 2 and awac.config("scratch").awac_lambda == 0.3333
+
+
 def test_preset_paper():
     studies = build(mujoco_medium, ["--preset", "paper"])
     assert len(studies) == 6 and all(s.updates == 1_000_000 for s in studies)

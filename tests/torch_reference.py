@@ -1,6 +1,7 @@
-"""Reference updates written the way PyTorch users write them, after CORL's td3_bc.py, edac.py, rebrac.py and
-iql.py, from the published equations: the other side of tests/test_parity_torch.py, which checks in float64 that
-our JAX updates equal these.  `benchmarks.pytorch` also times the TD3+BC and EDAC ones against the JAX driver.
+"""Reference updates written the way PyTorch users write them, after CORL's td3_bc.py, edac.py, rebrac.py, iql.py and
+finetune/awac.py, from the published equations: the other side of tests/test_parity_torch.py, which checks in
+float64 that our JAX updates equal these.  `benchmarks.pytorch` also times the TD3+BC and EDAC ones against the JAX
+driver.
 
 Defaults are the benchmark's shapes: hopper (obs 11, act 3), 100k random transitions, batch 256, default sizes
 (TD3+BC: 2x256 + LayerNorm, twin critics, policy delay 2; EDAC: 3x256 + LayerNorm, N = 10 vectorised critics,
@@ -427,3 +428,70 @@ class IQL:
         actor_loss.backward()
         self.actor_opt.step()
         self.schedule.step()
+
+
+# ------------------------------------------------------------------------------------------------------------- AWAC
+
+
+class AWACActor(nn.Module):
+    """CORL's AWAC actor: a Gaussian with an unsquashed mean and a state-independent log std clamped to [-20, 2];
+    its samples are clamped to [-1, 1].  `forward` takes the standard-normal noise of its `rsample` as an argument."""
+
+    def __init__(self, obs_dim: int = OBS_DIM, act_dim: int = ACT_DIM, hidden: tuple[int, ...] = (256, 256, 256)):
+        super().__init__()
+        self._mlp = mlp(obs_dim, hidden, act_dim, layer_norm=False)
+        self._log_std = nn.Parameter(torch.zeros(act_dim))
+
+    def _get_policy(self, state):
+        return torch.distributions.Normal(self._mlp(state), self._log_std.clamp(-20.0, 2.0).exp())
+
+    def log_prob(self, state, action):
+        return self._get_policy(state).log_prob(action).sum(-1, keepdim=True)
+
+    def forward(self, state, noise):
+        policy = self._get_policy(state)
+        action = policy.loc + policy.scale * noise  # rsample() with this noise
+        return action.clamp(-1.0, 1.0)
+
+
+class AWAC:
+    """CORL's `AdvantageWeightedActorCritic` (finetune/awac.py), for the parity tests: `update(batch, noise)` is the
+    critics (each its own Adam; r + gamma (1 - d) min of the target critics at a clamped policy sample of s', no
+    entropy; q1_loss + q2_loss), then the actor (exp((min Q(s, a) - min Q(s, a~)) / lambda) clamped at 100 times
+    -log pi(a | s), a~ a clamped sample, from the critics just updated), then both targets' Polyak update.  `noise`:
+    the two draws, TD target's then actor's."""
+
+    def __init__(self, awac_lambda: float = 1.0, gamma: float = 0.99, tau: float = 0.005, lr: float = 3e-4,
+                 obs_dim: int = OBS_DIM, act_dim: int = ACT_DIM, hidden: tuple[int, ...] = (256, 256, 256),
+                 exp_adv_max: float = 100.0):
+        self.actor = AWACActor(obs_dim, act_dim, hidden)
+        self.critics = nn.ModuleList([mlp(obs_dim + act_dim, hidden, 1, layer_norm=False) for _ in range(2)])
+        self.critics_target = copy.deepcopy(self.critics)
+        self.actor_opt = torch.optim.Adam(self.actor.parameters(), lr=lr)
+        self.critic_opts = [torch.optim.Adam(c.parameters(), lr=lr) for c in self.critics]
+        self.awac_lambda, self.gamma, self.tau, self.exp_adv_max = awac_lambda, gamma, tau, exp_adv_max
+
+    def q(self, critics, s, a):
+        return torch.min(critics[0](torch.cat([s, a], 1)), critics[1](torch.cat([s, a], 1)))
+
+    def update(self, batch, noise) -> None:
+        state, action, reward, next_state, done = batch
+        with torch.no_grad():
+            q_next = self.q(self.critics_target, next_state, self.actor(next_state, noise[0]))
+            q_target = reward + self.gamma * (1.0 - done) * q_next
+        sa = torch.cat([state, action], 1)
+        critic_loss = F.mse_loss(self.critics[0](sa), q_target) + F.mse_loss(self.critics[1](sa), q_target)
+        for opt in self.critic_opts:
+            opt.zero_grad()
+        critic_loss.backward()
+        for opt in self.critic_opts:
+            opt.step()
+        with torch.no_grad():
+            v = self.q(self.critics, state, self.actor(state, noise[1]))
+            adv = self.q(self.critics, state, action) - v
+            weights = torch.clamp_max(torch.exp(adv / self.awac_lambda), self.exp_adv_max)
+        actor_loss = (-self.actor.log_prob(state, action) * weights).mean()
+        self.actor_opt.zero_grad()
+        actor_loss.backward()
+        self.actor_opt.step()
+        polyak(self.critics, self.critics_target, self.tau)
