@@ -314,9 +314,9 @@ def test_warm_up_evaluations_keep_the_hand_over_on_the_update_axis():
     assert updates.tolist() == [50, 150] and scores.tolist() == [[40.0, 60.0]]
     curves = online_curves(rows, "a", (0,))
     assert curves["handover"].tolist() == [40.0] and curves["scores"].tolist() == [[10.0, 60.0]]
-    from offrl_jax.run.runner import _best_scores
+    from offrl_jax.run.results import best_scores
 
-    assert _best_scores(rows[:2]) == {"a": 40.0} and _best_scores(rows) == {"a": 60.0}  # not the two averaged
+    assert best_scores(rows[:2]) == {"a": 40.0} and best_scores(rows) == {"a": 60.0}  # not the two averaged
 
 
 def test_warm_up_evaluations_are_read_back_beside_the_hand_over_row(tmp_path):

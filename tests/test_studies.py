@@ -197,7 +197,7 @@ def test_a_failing_parallel_variant_stops_the_others_at_once(tmp_path, monkeypat
             raise Stopped("slow stopped")
         raise RuntimeError("fast failed")
 
-    monkeypatch.setattr(runner, "_run_group", fake_group)
+    monkeypatch.setattr(runner, "run_group", fake_group)
     study = Study(name="t", dataset="hopper-medium", env="hopper", updates=1000, eval_every=100,
                   variants=(Variant.of("slow", "td3bc", pretrain="none"), Variant.of("fast", "cql")))
     tic = time.monotonic()

@@ -174,7 +174,7 @@ def test_load_policy_rejects_arguments(tmp_path, kw, message):
     assert message in str(err.value) and "\n" not in str(err.value)
 
 
-@pytest.mark.parametrize("algo", ["bc", "td3bc", "td3bc_cql", "edac", "sacn", "edac_bc", "cql", "rebrac", "iql"])
+@pytest.mark.parametrize("algo", list(ALGOS))  # every algorithm the registry holds
 @pytest.mark.parametrize("pretrain", ["none", "actor", "critic", "actor+critic"])
 def test_a_configs_planned_phases_are_its_algorithms_phases(algo, pretrain):
     """What a budget check and a dry run read (`Config.phases`, no networks) is what training runs: the same

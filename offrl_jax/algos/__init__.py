@@ -10,7 +10,7 @@ algorithm class, and four names the registry reads:
     PRESETS       {preset: {algorithm or family: values}}: its named sets of values (--preset)
 
 A config's dataclass defaults are the values a run gets with no env and no preset.  A new family is its file and
-its name in `FAMILY_FILES` (docs/extending.md).
+its name in `FAMILY_FILES` (docs/extending.md); `register` adds one from elsewhere (tests/test_new_family.py).
 """
 from __future__ import annotations
 
@@ -25,15 +25,30 @@ from offrl_jax.envs.registry import ENVS
 
 FAMILY_FILES = ("td3bc", "sacn", "rebrac", "iql", "awac")  # the families, each a file of this package, in --algo order
 
-_modules = [importlib.import_module(f"{__name__}.{name}") for name in FAMILY_FILES]
-FAMILIES: dict[str, Family] = {name: module.FAMILY for name, module in zip(FAMILY_FILES, _modules)}
-ALGOS: dict[str, Algo] = {name: algo for module in _modules for name, algo in module.ALGOS.items()}
-ENV_DEFAULTS: dict[tuple[str, str], dict[str, Any]] = {key: values for module in _modules
-                                                        for key, values in module.ENV_DEFAULTS.items()}
+FAMILIES: dict[str, Family] = {}
+ALGOS: dict[str, Algo] = {}
+ENV_DEFAULTS: dict[tuple[str, str], dict[str, Any]] = {}
 PRESETS: dict[str, dict[str, dict[str, Any]]] = {}
-for _module in _modules:
-    for _preset, _values in _module.PRESETS.items():
-        PRESETS.setdefault(_preset, {}).update(_values)
+
+
+def register(name: str, module: Any) -> None:
+    """Add the family that `module` holds (its FAMILY, ALGOS, ENV_DEFAULTS and PRESETS) to the registry under
+    `name`, as its name in `FAMILY_FILES` does.  A name or algorithm already registered is refused.
+
+    For a family outside this package (a test's throwaway one): register it before `offrl_jax.app` is imported,
+    whose flags are made from the registry then; worker processes (`--parallel` on the CPU) start without it."""
+    if name in FAMILIES or (taken := sorted(set(module.ALGOS) & set(ALGOS))):
+        raise ValueError(f"cannot register family {name!r}: {name if name in FAMILIES else taken[0]!r} is "
+                         "registered already")
+    FAMILIES[name] = module.FAMILY
+    ALGOS.update(module.ALGOS)
+    ENV_DEFAULTS.update(module.ENV_DEFAULTS)
+    for preset, values in module.PRESETS.items():
+        PRESETS.setdefault(preset, {}).update(values)
+
+
+for _name in FAMILY_FILES:
+    register(_name, importlib.import_module(f"{__name__}.{_name}"))
 
 
 def family_of(algo: str) -> Family:
@@ -142,4 +157,4 @@ def make_algorithm(config: Config, obs_dim: int, act_dim: int, num_transitions: 
 
 __all__ = ["ALGOS", "Algo", "Config", "ENV_DEFAULTS", "FAMILIES", "FAMILY_FILES", "Family", "PRESETS", "Phase",
            "Resolved", "SOURCES", "env_defaults", "family_of", "make_algorithm", "make_config", "preset_values",
-           "resolve", "saved_config"]
+           "register", "resolve", "saved_config"]

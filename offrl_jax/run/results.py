@@ -6,13 +6,14 @@ from __future__ import annotations
 import contextlib
 import csv
 import io
+import math
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
-from offrl_jax.run.study import Study
+from offrl_jax.run.study import Study, Variant
 from offrl_jax.system.checkpoint import atomic_write_bytes, atomic_write_text
 
 CURVE_COLUMNS = ("variant", "algo", "seed", "phase", "update", "seconds", "score")  # then each metric logged
@@ -97,6 +98,49 @@ def pretrain_ends_of(rows: list[dict]) -> dict[str, int]:
         if r.get("phase", "offline_rl") not in ("offline_rl", "online"):
             ends[r["variant"]] = max(ends[r["variant"]], r["update"])
     return ends
+
+
+def ended_pretraining(phases: list, rows: list[dict], planned: int) -> int:
+    """The pre-training updates of a group: the `planned` ones, or where a self-ending phase ended (its rows say)."""
+    if any(p.auto_stop for p in phases):
+        return max(pretrain_ends_of(rows).values(), default=planned)
+    return planned
+
+
+def best_scores(rows: list[dict]) -> dict[str, float]:
+    """Per variant, the best seed-mean score of its evaluations so far."""
+    by_eval: dict[tuple[str, int, int], list[float]] = {}  # an evaluation: its update and env step (the warm-up's
+    for r in rows:  # evaluations share the hand-over's update)
+        if math.isfinite(r["score"]):
+            by_eval.setdefault((r["variant"], r["update"], r.get("env_steps") or 0), []).append(r["score"])
+    best: dict[str, float] = {}
+    for (label, *_), scores in by_eval.items():
+        best[label] = max(best.get(label, -math.inf), sum(scores) / len(scores))
+    return best
+
+
+def metrics_at(rows: list[dict], members: list[tuple[Variant, int]], update: int) -> dict[str, np.ndarray] | None:
+    """Every metric of the rows at `update`, one value per member (None if a member has no row there)."""
+    at = {(r["variant"], r["seed"]): r for r in rows if r["update"] == update}
+    if any((v.label, seed) not in at for v, seed in members):
+        return None
+    fixed = {"variant", "algo", "seed", "phase", "update", "seconds", "score", "phase_ended"}
+    names = [k for k in at[(members[0][0].label, members[0][1])] if k not in fixed]
+    try:
+        return {k: np.array([at[(v.label, seed)][k] for v, seed in members]) for k in names}
+    except KeyError:
+        return None
+
+
+def chunk_rows(members: list[tuple[Variant, int]], chunk, scores: np.ndarray) -> list[dict]:
+    """The rows of curves.csv for one evaluated chunk (`offrl_jax.driver.Chunk`), one per member."""
+    return [
+        {"variant": variant.label, "algo": variant.algo, "seed": seed, "phase": chunk.phase, "update": chunk.update,
+         "seconds": round(chunk.seconds, 3), "score": float(scores[m])}
+        | ({} if chunk.env_steps is None else {"env_steps": chunk.env_steps})
+        | {name: float(np.asarray(value)[m]) for name, value in sorted(chunk.metrics.items())}
+        for m, (variant, seed) in enumerate(members)
+    ]
 
 
 def score_matrix(rows: list[dict], label: str, seeds: Sequence[int] | None = None
