@@ -21,7 +21,7 @@ def test_main_job_default():
     assert study.dataset == "hopper-medium" and labels(study) == ["pretrained", "scratch"]
     assert study.reference == "scratch" and study.seeds == (0, 1, 2, 3, 4) and study.updates == 40_000
     assert study.eval_every == 2_500 and study.eval_episodes == 5
-    assert dict(study.variants[0].overrides)["pretrain"] == "actor+critic"
+    assert study.variants[0].given()["pretrain"] == "actor+critic"
 
 
 def test_ablation_layernorm_lambda_qtransformer():
@@ -31,22 +31,22 @@ def test_ablation_layernorm_lambda_qtransformer():
     lam = build(lambda_sweep, [])[0]
     assert labels(lam) == ["lambda=0", "lambda=0.1", "lambda=0.5", "lambda=1", "scratch"]
     qt = build(qtransformer, [])[0]
-    assert dict(qt.variants[1].overrides)["target"] == "max_mc"
+    assert qt.variants[1].given()["target"] == "max_mc"
 
 
 def test_figure2_and_replay():
     fig = build(figure2, [])
     assert len(fig) == 6
     edac = [s for s in fig if s.name == "figure2-walker2d-edac"][0]
-    pretrained, scratch = (dict(v.overrides) for v in edac.variants)
+    pretrained, scratch = (v.given() for v in edac.variants)
     assert edac.updates == 16_000 and edac.eval_every == 1_000 and pretrained["num_critics"] == 10
     assert pretrained["pretrain_updates"] == 12_000 and pretrained["actor_pretrain_fraction"] == 0.25
     assert "pretrain_updates" not in scratch  # the EDAC pre-training defaults go to the pre-trained arm only
     reordered = {s.name: s for s in build(figure2, ["--algos", "edac", "td3bc", "--envs", "hopper",
                                                     "--pretrain-updates", "6000"])}
     td3bc = reordered["figure2-hopper-td3bc"]
-    assert td3bc.updates == 30_000 and dict(td3bc.variants[0].overrides).get("num_critics") is None
-    assert dict(reordered["figure2-hopper-edac"].variants[0].overrides)["pretrain_updates"] == 6000  # flag wins
+    assert td3bc.updates == 30_000 and td3bc.variants[0].given().get("num_critics") is None
+    assert reordered["figure2-hopper-edac"].variants[0].given()["pretrain_updates"] == 6000  # flag wins
     assert [s.dataset for s in build(replay, [])] == ["hopper-medium-replay"]
     assert [s.dataset for s in build(replay, ["--levels", "medium-replay", "full-replay"])] == [
         "hopper-medium-replay", "hopper-full-replay"]
@@ -116,8 +116,8 @@ def test_preset_paper_refuses_the_flags_it_sets():
 
 def test_figure2_num_critics_is_edac_only():
     studies = {s.name: s for s in build(figure2, ["--envs", "hopper", "--num-critics", "4"])}
-    assert all("num_critics" not in dict(v.overrides) for v in studies["figure2-hopper-td3bc"].variants)
-    assert all(dict(v.overrides)["num_critics"] == 4 for v in studies["figure2-hopper-edac"].variants)
+    assert all("num_critics" not in v.given() for v in studies["figure2-hopper-td3bc"].variants)
+    assert all(v.given()["num_critics"] == 4 for v in studies["figure2-hopper-edac"].variants)
 
 
 def test_alpha_sweep_builds_one_variant_per_value_and_groups_them():

@@ -116,14 +116,12 @@ def replay(saved: Study | list[Study], args, given: set[str], hparams: dict) -> 
 
     def one(study: Study) -> Study:
         for field in hparams:  # the variants were made to differ in it (a sweep, an ablation): their labels say so
-            values = {repr(dict(v.overrides).get(field, "(its default)")): v for v in study.variants}
+            values = {repr(v.given().get(field, "(its default)")): v for v in study.variants}
             if len(values) > 1:
                 raise UsageError(f"--{field.replace('_', '-')}: the saved run's variants differ in {field} ("
                                  f"{', '.join(f'{v.label}: {k}' for k, v in values.items())}), so one value for all "
                                  "would leave their labels false; start a new run to compare other values")
-        variants = tuple(dataclasses.replace(v, overrides=tuple(sorted((dict(v.overrides) | hparams).items())),
-                                             flags=None if v.flags is None else (*v.flags, *hparams))
-                         for v in study.variants)
+        variants = tuple(v.with_values(hparams) for v in study.variants)
         return dataclasses.replace(study, variants=variants, **fields, **seeds(study))
 
     return [one(s) for s in saved] if isinstance(saved, list) else one(saved)

@@ -117,37 +117,49 @@ def chosen(args) -> dict:
     return ({"preset": default} if default and not getattr(args, "preset", None) else {}) | given(args)
 
 
-def sweep_variants(label: str, algo: str, fixed: dict, flags: frozenset[str] = frozenset()) -> tuple[Variant, ...]:
-    """One variant, or one per value of a swept flag (labels "pretrained alpha=2.5", ...); the runner trains a
-    sweep's variants as one program.  A "preset" entry of `fixed` is the variants' config preset, applied under the
-    other entries; the entries named in `flags` were given on the command line (the rest are the study's own)."""
+def sweep_variants(label: str, algo: str, fixed: dict, flags: frozenset[str] = frozenset(), env: str = "",
+                   dataset: str = "") -> tuple[Variant, ...]:
+    """One variant, or one per value of a swept flag (labels "pretrained alpha=2.5", ...), resolved on `env` and
+    `dataset`; the runner trains a sweep's variants as one program.  A "preset" entry of `fixed` is the variants'
+    config preset, applied under the other entries; the entries named in `flags` were given on the command line (the
+    rest are the study's own)."""
     fixed = dict(fixed)
     preset = fixed.pop("preset", None)
     swept = [k for k in SWEPT if isinstance(fixed.get(k), list)]
-    if not swept:
-        return (Variant(label, algo, tuple(sorted(fixed.items())), preset, tuple(flags)),)
     if len(swept) > 1:
         raise ValueError(f"sweep one hyper-parameter at a time, got several values for {' and '.join(swept)}")
-    name = swept[0]
-    return tuple(Variant(f"{label} {name}={value:g}", algo, tuple(sorted((fixed | {name: value}).items())), preset,
-                         tuple(flags)) for value in fixed[name])
+    points = [(f"{label} {swept[0]}={value:g}", fixed | {swept[0]: value}) for value in fixed[swept[0]]] \
+        if swept else [(label, fixed)]
+    return tuple(Variant.make(name, algo, env, dataset, preset, values, flags) for name, values in points)
 
 
-def study_variants(label: str, algo: str, own: dict, args, fixed: dict | None = None) -> tuple[Variant, ...]:
-    """`sweep_variants` of the study's own values `own` under the flags given (`chosen(args)`, which win), and
-    `fixed`, values of the study's that no flag changes (they win over the flags)."""
-    fixed = fixed or {}
-    return sweep_variants(label, algo, own | chosen(args) | fixed, frozenset(overrides(args)) - fixed.keys())
+def study_variants(label: str, algo: str, own: dict, args, fixed: dict | None = None, env: str | None = None,
+                   drop: tuple[str, ...] = ()) -> tuple[Variant, ...]:
+    """`sweep_variants` of the study's own values `own` under the flags given (`chosen(args)`, which win, but those
+    named in `drop`), and `fixed`, values of the study's that no flag changes (they win over the flags); on `env`
+    (default --env) and the dataset the study trains on there (`dataset_of`)."""
+    fixed, env = fixed or {}, env or args.env
+    flags = {k: v for k, v in chosen(args).items() if k not in drop}
+    return sweep_variants(label, algo, own | flags | fixed, frozenset(overrides(args)) - fixed.keys() - set(drop),
+                          env, dataset_of(env, args))
 
 
-def pretrain_variants(algo: str, modes, args) -> tuple[Variant, ...]:
-    return tuple(v for mode in modes for v in study_variants(LABELS[mode], algo, {"pretrain": mode}, args))
+def pretrain_variants(algo: str, modes, args, env: str | None = None, own: dict | None = None,
+                      drop: tuple[str, ...] = ()) -> tuple[Variant, ...]:
+    """One variant per pre-training mode (`study_variants`; `own`: the study's other values for them)."""
+    return tuple(v for mode in modes for v in study_variants(LABELS[mode], algo, (own or {}) | {"pretrain": mode},
+                                                             args, env=env, drop=drop))
+
+
+def dataset_of(env: str, args) -> str:
+    """The dataset a study on `env` trains on: --dataset-path, or <env>-<level> (`check_level`)."""
+    return args.dataset_path or f"{env}-{check_level(env, getattr(args, 'level', 'medium'), args)}"
 
 
 def make_study(env: str, algo: str, level: str, args, extra: dict | None = None,
                variants: tuple[Variant, ...] | None = None, reference: str | None = None, name: str = "") -> Study:
     if variants is None:
-        variants = pretrain_variants(algo, args.pretrain, args)
+        variants = pretrain_variants(algo, args.pretrain, args, env)
         reference = LABELS["none"] if "none" in args.pretrain else None
     fields = study_fields(args) | (extra or {})
     if args.dataset_path and "level" in getattr(args, "typed", ()):  # flags that would be ignored are refused
@@ -159,7 +171,7 @@ def make_study(env: str, algo: str, level: str, args, extra: dict | None = None,
     study = Study(name=name or f"{data_name}-{algo}", dataset=dataset, env=env, variants=variants,
                   reference=reference, **fields)
     for v in study.variants:
-        auto_only = sorted({"pretrain_auto_window", "pretrain_auto_tol"} & dict(v.overrides).keys())
+        auto_only = sorted({"pretrain_auto_window", "pretrain_auto_tol"} & v.given().keys())
         if auto_only and not study.config(v.label).pretrain_auto:
             raise UsageError(f"{', '.join('--' + f.replace('_', '-') for f in auto_only)} applies only to "
                              "--pretrain-updates auto[:CAP]; give that too, or leave it out")

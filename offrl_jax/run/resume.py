@@ -81,7 +81,7 @@ def group_identity(study: Study, group: tuple[Variant, ...], data_sha256: str) -
     phase (`Study.start_from`)."""
     resolved = study.resolved()
     offline = lambda pairs: [list(o) for o in pairs if o[0] not in ONLINE_FIELDS]  # noqa: E731
-    identity = {"variants": [[v.label, v.algo, offline(v.overrides)] for v in group],
+    identity = {"variants": [[v.label, v.algo, offline(sorted(v.given().items()))] for v in group],
                 "resolved": [{k: x for k, x in resolved[v.label].items() if k not in ONLINE_FIELDS} for v in group],
                 "seeds": list(study.seeds),
                 "batch_size": study.batch_size, "env": study.env, "data": data_sha256,
