@@ -160,13 +160,19 @@ def checkpoint_differences(payload: dict, study: Study, group: tuple[Variant, ..
 
 
 def resolved_differences(study: Study, config_path: Path) -> list[str]:
-    """Where the `resolved` section of a run's config.json differs from what `study`'s variants resolve to now
-    ("label.field saved -> now"); a field only one of them has is no difference (it was added or removed since)."""
+    """Where the `resolved` section of a run's config.json differs from what `study`'s variants resolve to now from
+    the values given them, their preset and the tables ("label.field saved -> now"): a value edited by hand, which its
+    recorded source does not give; a field only one of them has is no difference (it was added or removed since)."""
     try:
         saved = json.loads(config_path.read_text()).get("resolved") or {}
     except (OSError, ValueError, AttributeError):
         return []  # a config.json that cannot be read was refused when the study was read from it
-    now = json.loads(json.dumps(study.resolved(), default=list))
+    def again(v: Variant) -> Variant:  # `v` resolved from what was given it (no "flag" record before: "variant")
+        flags = None if "variant" in v.sources.values() else [k for k, s in v.sources.items() if s == "flag"]
+        return Variant.make(v.label, v.algo, study.env, study.dataset, v.preset, v.given(), flags)
+
+    now = {v.label: dataclasses.asdict(again(v).config) for v in study.variants}
+    now = json.loads(json.dumps(now, default=list))
     return [f"{label}.{key} {value!r} -> {now[label][key]!r}"
             for label, values in saved.items() if isinstance(values, dict) and label in now
             for key, value in values.items() if key in now[label] and value != now[label][key]]
