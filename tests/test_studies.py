@@ -62,9 +62,11 @@ def test_figure2_beyond_the_paper_rebrac_and_iql():
     assert given[0].batch_size == 512
 
 
-def test_preset_paper():
-    studies = build(mujoco_medium, ["--preset", "paper"])
+def test_study_paper():
+    studies = build(mujoco_medium, ["--study", "paper"])
     assert len(studies) == 6 and all(s.updates == 1_000_000 for s in studies)
+    assert {(s.env, s.variants[0].algo) for s in studies} == {(e, a) for e in ("hopper", "halfcheetah", "walker2d")
+                                                              for a in ("td3bc", "edac")}
 
 
 @pytest.mark.parametrize("module, argv", [
@@ -82,10 +84,15 @@ def test_a_study_does_not_accept_a_flag_it_would_ignore(module, argv, capsys):
     assert e.value.code == 2 and capsys.readouterr().err.startswith("error: unrecognized arguments")
 
 
-def test_only_the_main_job_has_the_paper_preset(capsys):
+@pytest.mark.parametrize("module, argv, refusal", [
+    (figure2, ["--study", "paper"], "unrecognized arguments: --study paper"),  # the main job's only
+    (mujoco_medium, ["--preset", "paper"], "invalid choice: 'paper'"),  # a whole study is no table of values
+])
+def test_a_whole_study_is_the_main_jobs_study_not_a_preset(module, argv, refusal, capsys):
     with pytest.raises(SystemExit) as e:
-        figure2.main(["--preset", "paper"])
-    assert e.value.code == 2 and "invalid choice: 'paper'" in capsys.readouterr().err
+        module.main(argv)
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and refusal in err and len(err.strip().splitlines()) == 1
 
 
 def test_the_main_job_declares_its_default_preset():
@@ -101,17 +108,17 @@ def test_the_main_job_declares_its_default_preset():
     assert "alpha" not in build(mujoco_medium, ["--algo", "edac"])[0].sources()["scratch"]  # TD3+BC's only
     args = mujoco_medium.make_parser().parse_args([])
     assert args.preset is None and mujoco_medium.given(args) == {}  # not a parsed flag: --config replays nothing
-    with pytest.raises(UsageError, match="one config preset at a time"):
+    with pytest.raises(SystemExit):  # one table of values at a time
         build(mujoco_medium, ["--preset", "authors", "published"])
 
 
-def test_preset_paper_refuses_the_flags_it_sets():
-    with pytest.raises(UsageError, match="--preset paper sets --env, --updates itself"):
-        build(mujoco_medium, ["--preset", "paper", "--env", "walker2d", "--updates", "1000"])
+def test_study_paper_refuses_the_flags_it_sets():
+    with pytest.raises(UsageError, match="--study paper sets --env, --updates itself"):
+        build(mujoco_medium, ["--study", "paper", "--env", "walker2d", "--updates", "1000"])
     # a flag typed with its default value is typed too (the command line says which were typed)
     from tests.entry import run_module
-    result = run_module("experiments.mujoco_medium", "--preset", "paper", "--updates", "40000")
-    assert result.returncode == 2 and "--preset paper sets --updates itself; leave it out" in result.stderr
+    result = run_module("experiments.mujoco_medium", "--study", "paper", "--updates", "40000")
+    assert result.returncode == 2 and "--study paper sets --updates itself; leave it out" in result.stderr
 
 
 def test_figure2_num_critics_is_edac_only():

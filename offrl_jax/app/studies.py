@@ -29,12 +29,11 @@ LABELS = {"actor+critic": "pretrained", "none": "scratch", "actor": "actor-only"
 
 
 def parser(prog: str, doc: str, updates: int = 100_000,
-           eval_every: int = 5_000, env: str = "hopper", omit: tuple[str, ...] = (), preset: bool = False,
+           eval_every: int = 5_000, env: str = "hopper", omit: tuple[str, ...] = (),
            seeds: int = 3, eval_episodes: int = 10, default_preset: str | None = None,
            online: bool = False, adroit: bool = False) -> argparse.ArgumentParser:
     """The flags every MuJoCo study shares; studies pass their own defaults, leave out the flags they set
-    themselves (`omit`: destinations, e.g. ("pretrain", "lam")), and only the main job has `--preset paper`
-    (`preset`); `default_preset` names the config preset the study applies when no --preset is given; the config
+    themselves (`omit`: destinations, e.g. ("pretrain", "lam")); `default_preset` names the config preset the study applies when no --preset is given; the config
     fields only an online phase reads (`ONLINE_FIELDS`) are flags of a study with one (`online`); a study with
     `adroit` also takes door-human and door-cloned (`--env door --level human|cloned`; `check_level`).  Each
     hyper-parameter's stated default is the study's own, read from what it builds when its help is shown
@@ -69,14 +68,8 @@ def parser(prog: str, doc: str, updates: int = 100_000,
                     "paper's per-env values.  " if "published" in PRESETS else "")
     help_default += (f"Default: {default_preset}" if default_preset else
                      "Default: none (each value is the per-env table's or the config's)")
-    if preset:
-        add("--preset", nargs="+", choices=("paper", *PRESETS), default=None,
-            help="paper: 3 envs x {td3bc, edac} medium x --seeds seeds x 1M updates (evaluation every 10k), "
-                 "each in its own sub-directory; --env/--algo/--level/--updates/--eval-every other than their "
-                 "defaults are refused.  " + help_authors + ".  paper may be given with one other.  "
-                 + help_default)
-    else:
-        add("--preset", nargs=1, choices=tuple(PRESETS), default=None, help=help_authors + ".  " + help_default)
+    add("--preset", nargs=1, choices=tuple(PRESETS), default=None,
+        help="a table of values for every variant.  " + help_authors + ".  " + help_default)
     p.set_defaults(default_preset=default_preset)
     add_config_flags(p, tuple(omit) + (() if online else tuple(ONLINE_FIELDS)))
     run_args(p, updates=updates, eval_every=eval_every, seeds=seeds, eval_episodes=eval_episodes)
@@ -104,11 +97,8 @@ SWEPT = tuple(sorted(sweepable_fields()))  # flags that take several values (a s
 def given(args) -> dict:
     """The hyper-parameters set on the command line (the rest take the per-env defaults); a swept flag given one
     value is that value, given several it stays a list (see `sweep_variants`)."""
-    values = overrides(args)
-    config_presets = [p for p in getattr(args, "preset", None) or [] if p in PRESETS]
-    if len(config_presets) > 1:
-        raise UsageError(f"--preset {' '.join(config_presets)}: one config preset at a time")
-    return values | ({"preset": config_presets[0]} if config_presets else {})
+    preset = getattr(args, "preset", None)  # nargs=1: a list of one name, or None
+    return overrides(args) | ({"preset": preset[0]} if preset else {})
 
 
 def chosen(args) -> dict:
