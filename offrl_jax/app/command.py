@@ -400,7 +400,7 @@ def run_command(build: Build, parser: argparse.ArgumentParser, argv=None,
 
     For --config: `hparam_dests` are the flags that set single hyper-parameters, and `hparams(args)` the overrides
     they make ({config field: value}, None for a flag not given)."""
-    state_defaults(parser, build)  # --help's "Default:" of each hyper-parameter: what the study gives it
+    state_defaults(parser, build, argv)  # --help: the --algo's hyper-parameters, each with what the study gives it
     command = Command(parser.parse_args(argv), parser, argv)
     one_line_warnings()
     ok, code = False, 1
