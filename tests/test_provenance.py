@@ -86,7 +86,8 @@ def test_config_json_records_where_each_value_came_from_and_an_older_one_still_r
         ("flag", "study", "preset", "default")
     assert raw["resolved"]["a"]["init"] == "torch"
     assert Study.from_json(json.dumps(raw)) == study
-    assert raw["variants"] == [{"label": "a", "algo": "td3bc", "preset": "authors"}]  # its config is `resolved`
+    assert raw["variants"] == [{"label": "a", "algo": "td3bc", "preset": "authors", "env": "hopper",
+                                "dataset": "hopper-medium"}]  # its config is `resolved`
     # a config.json written before variants carried their config (overrides, preset, flags): resolved as then
     older = dict(raw, variants=[{"label": "a", "algo": "td3bc", "overrides": [["alpha", 4.0], ["pretrain", "none"]],
                                  "preset": "authors", "flags": ["alpha"]}])

@@ -216,3 +216,12 @@ def test_each_family_builds_its_layers_from_its_own_fields():
     assert make_config("edac", "hopper", preset="authors").arch().hidden_bias == 0.1
     assert make_config("rebrac", "hopper").arch().hidden_bias == 0.1
     assert dataclasses.replace(make_config("rebrac", "hopper"), hidden_bias=None).arch().hidden_bias is None
+
+
+def test_a_study_refuses_a_variant_made_with_another_envs_values():
+    walker = Variant.of("a", "td3bc", "walker2d")
+    with pytest.raises(ValueError) as err:
+        Study(name="s", dataset="hopper-medium", env="hopper", variants=(walker,))
+    assert "variant 'a' has walker2d's values, and the study is on hopper" in str(err.value)
+    assert "\n" not in str(err.value)
+    Study(name="s", dataset="hopper-medium", env="hopper", variants=(Variant.of("a", "td3bc"),))  # no env's: taken

@@ -167,11 +167,7 @@ def resolved_differences(study: Study, config_path: Path) -> list[str]:
         saved = json.loads(config_path.read_text()).get("resolved") or {}
     except (OSError, ValueError, AttributeError):
         return []  # a config.json that cannot be read was refused when the study was read from it
-    def again(v: Variant) -> Variant:  # `v` resolved from what was given it (no "flag" record before: "variant")
-        flags = None if "variant" in v.sources.values() else [k for k, s in v.sources.items() if s == "flag"]
-        return Variant.make(v.label, v.algo, study.env, study.dataset, v.preset, v.given(), flags)
-
-    now = {v.label: dataclasses.asdict(again(v).config) for v in study.variants}
+    now = {v.label: dataclasses.asdict(v.again().config) for v in study.variants}
     now = json.loads(json.dumps(now, default=list))
     return [f"{label}.{key} {value!r} -> {now[label][key]!r}"
             for label, values in saved.items() if isinstance(values, dict) and label in now

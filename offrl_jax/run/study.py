@@ -99,6 +99,9 @@ class Study:
             raise ValueError(f"Study.reference = {self.reference!r} is not a variant label ({', '.join(labels)})")
         horizon = get_env_spec(self.env).max_episode_steps
         for v in self.variants:  # every variant's config, checked with the budget before anything is written
+            if v.env not in ("", self.env):
+                raise ValueError(f"variant {v.label!r} has {v.env}'s values, and the study is on {self.env}: make it "
+                                 f"on {self.env} (Variant.make / Variant.of with env={self.env!r})")
             planned = v.config.phases(v.config.budget(self.updates))
             check_call_grid(planned, self.eval_every)
             if self.online is not None:

@@ -29,6 +29,8 @@ class Variant:
     config: Config  # the resolved, checked config (`offrl_jax.algos.resolve`): what the algorithm reads
     sources: dict[str, str] = dataclasses.field(default_factory=dict, hash=False)  # field: `SOURCES` entry
     preset: str | None = None  # the preset (`offrl_jax.algos.PRESETS`) its "preset" values came from, a record
+    env: str = ""  # the env its per-env values are for ("": none, the dataclass defaults), and the dataset
+    dataset: str = ""
 
     def __post_init__(self):
         check_file_name("Variant.label", self.label)
@@ -36,6 +38,8 @@ class Variant:
             raise ValueError(f"Variant.config = {self.config!r:.80} must be a {family_of(self.algo).config.__name__}")
         if self.preset is not None and not isinstance(self.preset, str):
             raise ValueError(f"Variant.preset = {self.preset!r} must be a preset's name or None")
+        if not isinstance(self.env, str) or not isinstance(self.dataset, str):
+            raise ValueError(f"Variant.env = {self.env!r}, dataset = {self.dataset!r} must be strings")
         fields = [f.name for f in dataclasses.fields(self.config)]
         object.__setattr__(self, "sources", {name: dict(self.sources).get(name, "default") for name in fields})
 
@@ -45,7 +49,7 @@ class Variant:
         """`algo` resolved on `env` (and `dataset`) under `preset` and `values`, of which those named in `flags` came
         from the command line (`offrl_jax.algos.resolve`: the one place a run's values are decided)."""
         resolved = resolve(algo, env, dataset, preset, values or {}, flags)
-        return Variant(label, algo, resolved.config, resolved.sources, preset)
+        return Variant(label, algo, resolved.config, resolved.sources, preset, env, dataset)
 
     @staticmethod
     def of(label: str, algo: str, env: str = "", dataset: str = "", **values: Any) -> Variant:
@@ -86,7 +90,14 @@ class Variant:
             return Variant.make(label, algo, env, dataset, entry.get("preset"), pairs,
                                 None if flags is None else tuple(flags))
         config = saved_config(algo, (raw.get("resolved") or {})[label])
-        return Variant(label, algo, config, (raw.get("sources") or {}).get(label, {}), entry.get("preset"))
+        return Variant(label, algo, config, (raw.get("sources") or {}).get(label, {}), entry.get("preset"),
+                       entry.get("env", env), entry.get("dataset", dataset))
 
     def to_json(self) -> dict:
-        return {"label": self.label, "algo": self.algo, "preset": self.preset}
+        return {"label": self.label, "algo": self.algo, "preset": self.preset, "env": self.env,
+                "dataset": self.dataset}
+
+    def again(self) -> Variant:
+        """This variant resolved again from the values given it, its preset and the tables as they are now."""
+        flags = None if "variant" in self.sources.values() else [k for k, s in self.sources.items() if s == "flag"]
+        return Variant.make(self.label, self.algo, self.env, self.dataset, self.preset, self.given(), flags)
