@@ -40,7 +40,8 @@ def build(args):
     studies = [make_study(args.env, "bc", args.level, args, variants=(Variant.make("BC", "bc", values=BC, **on),),
                           extra={"updates": args.bc_updates, "eval_every": args.bc_updates // 4}, name="bc")]
     if args.td3bc_updates:
-        studies.append(make_study(args.env, "td3bc", args.level, args, variants=(Variant.make("TD3+BC from scratch", "td3bc", values=TD3BC, **on),),
+        td3bc = Variant.make("TD3+BC from scratch", "td3bc", values=TD3BC, **on)
+        studies.append(make_study(args.env, "td3bc", args.level, args, variants=(td3bc,),
                                   extra={"updates": args.td3bc_updates, "eval_every": args.td3bc_updates // 10},
                                   name="td3bc"))
     return studies

@@ -33,7 +33,8 @@ def parser(prog: str, doc: str, updates: int = 100_000,
            seeds: int = 3, eval_episodes: int = 10, default_preset: str | None = None,
            online: bool = False, adroit: bool = False) -> argparse.ArgumentParser:
     """The flags every MuJoCo study shares; studies pass their own defaults, leave out the flags they set
-    themselves (`omit`: destinations, e.g. ("pretrain", "lam")); `default_preset` names the config preset the study applies when no --preset is given; the config
+    themselves (`omit`: destinations, e.g. ("pretrain", "lam")); `default_preset` names the config preset the study
+    applies when no --preset is given; the config
     fields only an online phase reads (`ONLINE_FIELDS`) are flags of a study with one (`online`); a study with
     `adroit` also takes door-human and door-cloned (`--env door --level human|cloned`; `check_level`).  Each
     hyper-parameter's stated default is the study's own, read from what it builds when its help is shown

@@ -65,7 +65,8 @@ class Variant:
         """This variant with `values` set (one line naming a field its algorithm does not have)."""
         fields = [f.name for f in dataclasses.fields(self.config)]
         if unknown := sorted(set(values) - set(fields)):
-            raise ValueError(f"'{unknown[0]}' is not a hyper-parameter of {self.algo}; valid: {', '.join(sorted(fields))}")
+            raise ValueError(f"'{unknown[0]}' is not a hyper-parameter of {self.algo}; valid: "
+                             f"{', '.join(sorted(fields))}")
         return dataclasses.replace(self, config=dataclasses.replace(self.config, **values),
                                    sources=self.sources | dict.fromkeys(values, source))
 
@@ -83,7 +84,8 @@ class Variant:
                 raise ValueError(f"variant {label!r}: overrides = {entry['overrides']!r:.80} must be (name, value) "
                                  "pairs") from None
             if not all(isinstance(k, str) for k in pairs):
-                raise ValueError(f"variant {label!r}: overrides = {entry['overrides']!r:.80} must be (name, value) pairs")
+                raise ValueError(f"variant {label!r}: overrides = {entry['overrides']!r:.80} must be (name, value) "
+                                 "pairs")
             flags = entry.get("flags")
             if flags is not None and (isinstance(flags, str) or not all(isinstance(f, str) for f in flags)):
                 raise ValueError(f"variant {label!r}: flags = {flags!r} must be names of its overrides")
