@@ -15,7 +15,8 @@ import json
 import sys
 from collections.abc import Callable
 
-from offrl_jax.app.flags import family_in, show_family
+from offrl_jax.algos import ALGOS
+from offrl_jax.app.flags import algo_in, show_family
 from offrl_jax.run.study import Study
 from offrl_jax.system.cli import UsageError
 
@@ -57,16 +58,15 @@ def state_defaults(parser: argparse.ArgumentParser, build: Callable, argv: list[
     format_help = parser.format_help
 
     def stated() -> str:
-        words = sys.argv[1:] if argv is None else list(argv)
         one = any(a.dest == "algo" and a.option_strings for a in parser._actions)  # the study trains one --algo
-        family = family_in(words, parser.get_default("algo")) if one else None
+        algo = algo_in(sys.argv[1:] if argv is None else list(argv)) if one else None
+        shown = algo or (parser.get_default("algo") if one else None)
+        family = ALGOS[shown].family if shown in ALGOS else None
         show_family(parser, family)
-        algo = next((w.split("=", 1)[1] if "=" in w else after for w, after in zip(words, [*words[1:], ""])
-                     if w == "--algo" or w.startswith("--algo=")), None) if one else None
-        defaults = field_defaults(parser, build, ["--algo", algo] if algo else [])
+        defaults = field_defaults(parser, build, ["--algo", algo] if algo in ALGOS else [])
         for group in parser._action_groups:
             if group.title == "hyper-parameters" and family is not None:
-                group.description = (f"the fields of {algo or parser.get_default('algo')}'s config ({family} family, "
+                group.description = (f"the fields of {shown}'s config ({family} family, "
                                      f"offrl_jax/algos/{family}.py); --algo X --help lists X's.  Not given = what the "
                                      "study gives it (each Default below; --dry-run shows every value and where it "
                                      "came from); a field the algorithm does not have is refused")

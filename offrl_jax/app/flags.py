@@ -161,15 +161,13 @@ def show_family(parser: argparse.ArgumentParser, family: str | None) -> None:
         action.help = action.all_help if family is None else action.family_help.get(family, argparse.SUPPRESS)
 
 
-def family_in(argv: list[str], default: str | None) -> str | None:
-    """The family of the algorithm an --algo in `argv` names (else `default`'s; None: none known)."""
-    from offrl_jax.algos import ALGOS
-
-    algo = default
+def algo_in(argv: list[str]) -> str | None:
+    """The algorithm the last --algo in `argv` names (None: no --algo)."""
+    algo = None
     for word, after in zip(argv, [*argv[1:], ""]):
         if word == "--algo" or word.startswith("--algo="):
             algo = word.split("=", 1)[1] if "=" in word else after
-    return ALGOS[algo].family if algo in ALGOS else None
+    return algo
 
 
 def sweepable_fields() -> frozenset[str]:
