@@ -183,3 +183,15 @@ def test_the_main_job_lists_the_fields_of_the_algo_it_trains():
     iql = run_module("experiments.mujoco_medium", "--algo", "iql", "--help")
     assert iql.returncode == 0 and "--expectile" in iql.stdout
     assert not re.search(r"^ +--alpha\b", iql.stdout, re.MULTILINE)  # TD3+BC's (the module's text names it)
+
+
+@pytest.mark.parametrize("algo", ["bc", "td3bc", "edac", "cql", "rebrac", "iql"])
+def test_every_algo_has_its_help_even_one_the_default_flags_cannot_build(algo):
+    """`--algo bc --help`: BC needs `--pretrain actor`, so the study's values cannot be read; its config's are shown."""
+    from experiments import mujoco_medium
+    from offrl_jax.app.dry_run import state_defaults
+
+    parser = mujoco_medium.make_parser()
+    state_defaults(parser, mujoco_medium.build, ["--algo", algo, "--help"])
+    text = " ".join(parser.format_help().split())
+    assert f"the fields of {algo}'s config" in text and "--gamma GAMMA" in text

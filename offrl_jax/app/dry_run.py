@@ -63,7 +63,10 @@ def state_defaults(parser: argparse.ArgumentParser, build: Callable, argv: list[
         shown = algo or (parser.get_default("algo") if one else None)
         family = ALGOS[shown].family if shown in ALGOS else None
         show_family(parser, family)
-        defaults = field_defaults(parser, build, ["--algo", algo] if algo in ALGOS else [])
+        try:
+            defaults = field_defaults(parser, build, ["--algo", algo] if algo in ALGOS else [])
+        except (UsageError, ValueError):  # it needs other flags too (bc: --pretrain actor): its config's own
+            defaults = {}
         for group in parser._action_groups:
             if group.title == "hyper-parameters" and family is not None:
                 group.description = (f"the fields of {shown}'s config ({family} family, "
