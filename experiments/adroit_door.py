@@ -53,7 +53,8 @@ def build(args) -> Study:
             flags["alpha"] = args.alpha
         if args.balance is not None and algo in ("td3bc_cql", "edac_bc"):
             flags["balance"] = args.balance
-        variants.append(Variant(label, algo, tuple(sorted((kw | flags).items())), args.preset, tuple(flags)))
+        variants.append(Variant.make(label, algo, "door", args.dataset_path or args.dataset, args.preset, kw | flags,
+                                     tuple(flags)))
     fields = study_fields(args) | {"updates": updates, "eval_every": every}
     return Study(name=f"adroit-{args.dataset}", dataset=args.dataset_path or args.dataset, env="door",
                  variants=tuple(variants), final_window=(pretrain, updates), **fields)

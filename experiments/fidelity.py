@@ -21,26 +21,27 @@ from pathlib import Path
 
 from offrl_jax.app.command import run_command
 from offrl_jax.app.flags import FLAG_FIELDS
-from offrl_jax.app.studies import make_study, parser
+from offrl_jax.app.studies import dataset_of, make_study, parser
 from offrl_jax.data.generate.reference import CORL_UPDATES, D4RL_V2, target_band
 from offrl_jax.run.study import Variant
 from offrl_jax.system.checkpoint import atomic_write_text
 from offrl_jax.system.cli import UsageError, int_at_least, positive_int
 
 UPDATES, EVAL_EVERY = 20_000, 5_000  # the run flags' defaults, never used: build() sets each study's own budget
-BC = Variant.of("BC", "bc", pretrain="actor", actor_layer_norm=False)
-TD3BC = Variant.of("TD3+BC from scratch", "td3bc", pretrain="none", alpha=2.5, actor_layer_norm=False,
-                   critic_layer_norm=False)
+BC = dict(pretrain="actor", actor_layer_norm=False)  # the variants' own values, on the study's env
+TD3BC = dict(pretrain="none", alpha=2.5, actor_layer_norm=False, critic_layer_norm=False)
 
 
 def build(args):
     if args.updates != UPDATES or args.eval_every != EVAL_EVERY:
         raise UsageError("the fidelity command sets each study's budget itself: give --bc-updates / --td3bc-updates "
                          "instead of --updates / --eval-every")
-    studies = [make_study(args.env, "bc", args.level, args, variants=(BC,), extra={"updates": args.bc_updates,
-               "eval_every": args.bc_updates // 4}, name="bc")]
+    on = dict(env=args.env, dataset=dataset_of(args.env, args))
+    studies = [make_study(args.env, "bc", args.level, args, variants=(Variant.make("BC", "bc", values=BC, **on),),
+                          extra={"updates": args.bc_updates, "eval_every": args.bc_updates // 4}, name="bc")]
     if args.td3bc_updates:
-        studies.append(make_study(args.env, "td3bc", args.level, args, variants=(TD3BC,),
+        td3bc = Variant.make("TD3+BC from scratch", "td3bc", values=TD3BC, **on)
+        studies.append(make_study(args.env, "td3bc", args.level, args, variants=(td3bc,),
                                   extra={"updates": args.td3bc_updates, "eval_every": args.td3bc_updates // 10},
                                   name="td3bc"))
     return studies

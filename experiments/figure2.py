@@ -15,7 +15,6 @@ unless --edac-updates, --num-critics or --pretrain-updates say otherwise.
 
     python -m experiments.figure2 [--envs hopper] [--algos td3bc] [--edac-updates 50000] [--seeds 2]
 """
-from dataclasses import replace
 
 from offrl_jax.app.command import run_command
 from offrl_jax.app.flags import BATCH_SIZE
@@ -31,25 +30,23 @@ EDAC_UPDATES = 16_000  # the CPU-sized budget
 AUTHORS_EDAC_UPDATES = {"hopper": 3_000_000, "halfcheetah": 1_000_000, "walker2d": 12_000_000}
 
 
-def edac_overrides(overrides: dict, num_critics: int) -> dict:
-    pretrain = EDAC_PRETRAIN if overrides.get("pretrain", "none") != "none" else {}
-    return pretrain | overrides | {"num_critics": num_critics}
+def edac_values(mode: str) -> dict:
+    """The CPU-sized EDAC's own values for a variant of pre-training `mode` (flags given win over them)."""
+    return (EDAC_PRETRAIN if mode != "none" else {}) | {"num_critics": 10}
 
 
 def build(args):
     studies, authors = [], "authors" in (args.preset or [])
     for env in args.envs:
         for algo in args.algos:
-            variants, extra = pretrain_variants(algo, args.pretrain, args), {}
-            if algo != "edac":  # --num-critics is EDAC's ensemble; the others keep their two critics
-                variants = tuple(replace(v, overrides=tuple((k, x) for k, x in v.overrides if k != "num_critics"))
-                                 for v in variants)
+            # --num-critics is EDAC's ensemble; the others keep their two critics
+            drop, extra = ("num_critics",) if algo != "edac" else (), {}
+            variants = pretrain_variants(algo, args.pretrain, args, env, drop=drop)
             if algo == "edac" and authors:  # the authors' schedule: the preset's and per-env values, their budget
                 extra = {"updates": args.edac_updates or AUTHORS_EDAC_UPDATES[env], "eval_every": args.edac_eval_every}
             elif algo == "edac":  # 10 critics on a CPU unless --num-critics says otherwise
-                n = args.num_critics or 10
-                variants = tuple(replace(v, overrides=tuple(sorted(edac_overrides(dict(v.overrides), n).items())))
-                                 for v in variants)
+                variants = tuple(v for mode in args.pretrain for v in pretrain_variants(
+                    algo, [mode], args, env, own=edac_values(mode)))
                 extra = {"updates": args.edac_updates or EDAC_UPDATES, "eval_every": args.edac_eval_every}
             if algo == "rebrac" and args.batch_size == BATCH_SIZE:  # the flag's default: ReBRAC's own batch
                 extra = {"batch_size": 1024}

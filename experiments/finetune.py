@@ -166,9 +166,7 @@ def from_run(args, online: OnlineConfig) -> Study:
                              "checkpoint); give all of them")
     unfinished(run, saved, labels)
     values = {k: v for k, v in given(args).items() if k in ONLINE_FIELDS}
-    variants = tuple(dataclasses.replace(v, overrides=tuple(sorted((dict(v.overrides) | values).items())),
-                                         flags=tuple(v.flags or ()) + tuple(values))
-                     for v in saved.variants if v.label in labels)
+    variants = tuple(v.with_values(values) for v in saved.variants if v.label in labels)
     reference = saved.reference if any(reference_label(saved, v.label) in labels for v in variants) else None
     return dataclasses.replace(saved, variants=variants, online=online, reference=reference,
                                start_from=str(run.resolve()))

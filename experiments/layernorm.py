@@ -19,7 +19,7 @@ def build(args):
     for env in envs:
         variants = tuple(v for label, (a, c) in COMBOS.items()
                          for v in study_variants(label, args.algo, {"pretrain": "none", "actor_layer_norm": a,
-                                                                    "critic_layer_norm": c}, args))
+                                                                    "critic_layer_norm": c}, args, env=env))
         studies.append(make_study(env, args.algo, args.level, args, variants=variants, reference="LN actor+critic",
                                   name=f"layernorm-{env}-{args.level}-{args.algo}"))
     return studies if len(studies) > 1 else studies[0]

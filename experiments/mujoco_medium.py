@@ -16,7 +16,7 @@ results/mujoco_medium/default-5seeds/README.md; RESULTS.md says what happens wit
     python -m experiments.mujoco_medium --preset authors                                 # the authors' code's setup
     python -m experiments.mujoco_medium --env walker2d --algo edac --updates 50000
     python -m experiments.mujoco_medium --pretrain actor critic actor+critic none      # Appendix C ablation
-    python -m experiments.mujoco_medium --preset paper                                   # 3 envs x TD3+BC/EDAC, 1M
+    python -m experiments.mujoco_medium --study paper                                    # 3 envs x TD3+BC/EDAC, 1M
 """
 from __future__ import annotations
 
@@ -25,25 +25,31 @@ from offrl_jax.app.studies import ENVS, HPARAM_DESTS, given, make_study, parser
 from offrl_jax.run.study import Study
 from offrl_jax.system.cli import UsageError
 
-PRESET_FIXED = ("env", "algo", "level", "updates", "eval_every")  # what --preset paper sets itself
+PAPER_FIXED = ("env", "algo", "level", "updates", "eval_every")  # what --study paper sets itself
 
 
 def build(args) -> Study | list[Study]:
-    if "paper" in (args.preset or []):
+    if args.study == "paper":
         defaults, typed = make_parser(), getattr(args, "typed", frozenset())  # typed: set by the command line
-        changed = [f"--{d.replace('_', '-')}" for d in PRESET_FIXED
+        changed = [f"--{d.replace('_', '-')}" for d in PAPER_FIXED
                    if d in typed or getattr(args, d) != defaults.get_default(d)]
         if changed:
             them = "them" if len(changed) > 1 else "it"
-            raise UsageError(f"--preset paper sets {', '.join(changed)} itself; leave {them} out")
+            raise UsageError(f"--study paper sets {', '.join(changed)} itself; leave {them} out")
         return [make_study(env, algo, "medium", args, dict(updates=1_000_000, eval_every=10_000))
                 for env in ENVS for algo in ("td3bc", "edac")]
     return make_study(args.env, args.algo, args.level, args)
 
 
 def make_parser():  # the budget that fits 5 seeds in 30 minutes on 2 cores (module doc)
-    return parser("experiments.mujoco_medium", __doc__, updates=40_000, eval_every=2_500, seeds=5, eval_episodes=5,
-                  preset=True, default_preset="published")
+    p = parser("experiments.mujoco_medium", __doc__, updates=40_000, eval_every=2_500, seeds=5, eval_episodes=5,
+               default_preset="published")
+    p.add_argument_group("a whole study").add_argument(
+        "--study", choices=("paper",), default=None,
+        help="paper: 3 envs x {td3bc, edac} medium x --seeds seeds x 1M updates (evaluation every 10k), each in its "
+             "own sub-directory; --env/--algo/--level/--updates/--eval-every other than their defaults are refused; "
+             "a --preset applies to all of them")
+    return p
 
 
 def main(argv=None) -> int:

@@ -105,11 +105,11 @@ def test_cli_auto_and_cap():
 
     p = mujoco_medium.make_parser()
     # the self-ending phase checks its losses every 1k updates: the evaluation interval must be a multiple of it
-    o = dict(mujoco_medium.build(p.parse_args(["--pretrain-updates", "auto:30000", "--eval-every", "5000"]))
-             .variants[0].overrides)
+    o = mujoco_medium.build(p.parse_args(["--pretrain-updates", "auto:30000", "--eval-every", "5000"])) \
+        .variants[0].given()
     assert o["pretrain_auto"] is True and o["pretrain_updates"] == 30000
-    o = dict(mujoco_medium.build(p.parse_args(["--pretrain-updates", "auto", "--eval-every", "5000"]))
-             .variants[0].overrides)
+    o = mujoco_medium.build(p.parse_args(["--pretrain-updates", "auto", "--eval-every", "5000"])) \
+        .variants[0].given()
     assert o["pretrain_auto"] is True and "pretrain_updates" not in o
     with pytest.raises(SystemExit):
         p.parse_args(["--pretrain-updates", "auto:x"])

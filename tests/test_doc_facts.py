@@ -80,3 +80,25 @@ def test_a_list_of_the_families_config_classes_names_every_family():
         for paragraph in re.split(r"\n\s*\n", page.read_text()):
             named = configs & set(re.findall(r"`(\w+Config)`", paragraph))
             assert len(named) < 2 or named == configs, (page.name, sorted(configs - named), paragraph[:120])
+
+
+def test_the_walk_of_alpha_in_docs_extending_is_the_files_that_name_it():
+    """docs/extending.md walks `--alpha 10` through at most four files: each exists, the family and the loss name the
+    value, and the files it says carry the config in between name no `alpha` in their code (tokens, not text)."""
+    import io
+    import tokenize
+
+    text = (ROOT / "docs" / "extending.md").read_text()
+    walk = text[text.index("Where `--alpha 10` goes, file by file"):]
+    walk = walk[:walk.index("\n\n", walk.index("| file |"))]
+    files = re.findall(r"^\| `([\w/.]+\.py)` \|", walk, re.MULTILINE)
+    assert 0 < len(files) <= 4 and re.search(rf"\({['', 'one', 'two', 'three', 'four'][len(files)]} files", walk)
+
+    def names(path: str) -> set[str]:
+        source = (ROOT / "offrl_jax" / path).read_text()
+        return {t.string for t in tokenize.generate_tokens(io.StringIO(source).readline) if t.type == tokenize.NAME}
+
+    assert all((ROOT / "offrl_jax" / f).is_file() for f in files), files
+    assert "alpha" in names("algos/td3bc.py") and "alpha" in names("losses.py")
+    carriers = ["app/studies.py", "run/study.py", "run/runner.py", "run/group.py", "app/flags.py", "algos/__init__.py"]
+    assert not [f for f in carriers if "alpha" in names(f)]

@@ -113,20 +113,21 @@ def test_new_family_example_runs_through_the_runner(doc_namespace, tmp_path, tin
 
 
 def test_a_run_resolves_each_config_once(monkeypatch, tmp_path, tiny_dataset):
-    """A variant's config is built once, when its study is: the runner, the summary and the resume check read it
-    from the study."""
-    from offrl_jax.run import study as study_module
+    """A variant's config is built once, when it is made: the runner and the summary read it from the study; a
+    resume resolves each once more, to refuse a config.json edited by hand."""
+    from offrl_jax.run import variant as variant_module
     from offrl_jax.run.runner import run_study
     from offrl_jax.run.study import Study, Variant
 
     calls = []
-    real = study_module.resolve
-    monkeypatch.setattr(study_module, "resolve", lambda *a, **k: calls.append(a[0]) or real(*a, **k))
+    real = variant_module.resolve
+    monkeypatch.setattr(variant_module, "resolve", lambda *a, **k: calls.append(a[0]) or real(*a, **k))
     study = Study(name="t", dataset="synthetic", env="hopper", seeds=(0,), updates=200, eval_every=100,
                   eval_episodes=1, batch_size=32,
                   variants=(Variant.of("a", "td3bc", hidden=(16, 16), pretrain_updates=100),
                             Variant.of("b", "bc", hidden=(16, 16))))
     assert calls == ["td3bc", "bc"]
     run_study(study, tmp_path, tiny_dataset, progress=False)
-    run_study(study, tmp_path, tiny_dataset, progress=False, resume=True)  # the resume check included
     assert calls == ["td3bc", "bc"], calls
+    run_study(study, tmp_path, tiny_dataset, progress=False, resume=True)  # the resume check included
+    assert calls == ["td3bc", "bc"] * 2, calls

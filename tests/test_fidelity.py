@@ -332,7 +332,7 @@ def test_authors_preset_from_the_command_line():
         assert r["alpha"] == (10.0, "per-env") and r["init"] == ("torch", "preset")  # per-env alpha: hopper 10
         assert r["timeouts"] == ("drop", "flag") and r["actor_hidden"] == ((256, 256, 256), "preset")
     p = mujoco_medium.make_parser()
-    studies = mujoco_medium.build(p.parse_args(["--preset", "paper", "authors"]))
+    studies = mujoco_medium.build(p.parse_args(["--study", "paper", "--preset", "authors"]))
     assert len(studies) == 6 and all(s.config(v.label).balance == "signed" for s in studies for v in s.variants)
     (study,) = [adroit_door.build(adroit_door.make_parser().parse_args(
         ["--preset", "authors", "--variants", "TD3+BC+CQL", "--balance", "abs"]))]

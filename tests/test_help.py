@@ -144,3 +144,54 @@ def test_the_readme_names_the_experiments_without_dry_run(monkeypatch):
     for name in table:
         options = {o for a in command_parser(f"experiments.{name}", monkeypatch)._actions for o in a.option_strings}
         assert ("--dry-run" in options) == (name not in without), name
+
+
+def test_each_family_lists_its_own_fields_with_its_own_help():
+    """`--algo X --help` lists X's fields, each with X's help text: a field name may mean different things in two
+    families; the fields of other families are not listed."""
+    from offrl_jax.algos.config import Config
+
+    @dataclasses.dataclass(frozen=True)
+    class FirstConfig(Config):
+        weight: float = 1.0  # the first family's weight of its behaviour term
+
+    @dataclasses.dataclass(frozen=True)
+    class SecondConfig(Config):
+        weight: float = 3.0  # the second family's temperature
+        only_second: int = 2  # a field of the second family only
+
+    parser = argparse.ArgumentParser()
+    flags.add_config_flags(parser, configs=(FirstConfig, SecondConfig))
+    flags.show_family(parser, "first")
+    first = " ".join(parser.format_help().split())
+    assert "behaviour term. Default: 1.0" in first and "temperature" not in first and "--only-second" not in first
+    flags.show_family(parser, "second")
+    second = " ".join(parser.format_help().split())
+    assert "temperature. Default: 3.0" in second and "behaviour term" not in second and "--only-second" in second
+    assert parser.parse_args(["--weight", "2"]).weight == 2.0  # one flag parses it for both
+
+
+def test_the_main_job_lists_the_fields_of_the_algo_it_trains():
+    from tests.entry import run_module
+
+    td3bc = run_module("experiments.mujoco_medium", "--algo", "td3bc", "--help")
+    text = " ".join(td3bc.stdout.split())
+    assert td3bc.returncode == 0 and "--alpha" in text and "Default: 2.5 (preset published)" in text
+    assert not re.search(r"--(expectile|actor-beta|eta)\b", td3bc.stdout)  # not even in the usage line
+    plain = run_module("experiments.mujoco_medium", "--help")  # the default --algo's, and how to see another's
+    assert plain.stdout == td3bc.stdout and "--algo X --help lists X's" in " ".join(plain.stdout.split())
+    iql = run_module("experiments.mujoco_medium", "--algo", "iql", "--help")
+    assert iql.returncode == 0 and "--expectile" in iql.stdout
+    assert not re.search(r"^ +--alpha\b", iql.stdout, re.MULTILINE)  # TD3+BC's (the module's text names it)
+
+
+@pytest.mark.parametrize("algo", ["bc", "td3bc", "edac", "cql", "rebrac", "iql"])
+def test_every_algo_has_its_help_even_one_the_default_flags_cannot_build(algo):
+    """`--algo bc --help`: BC needs `--pretrain actor`, so the study's values cannot be read; its config's are shown."""
+    from experiments import mujoco_medium
+    from offrl_jax.app.dry_run import state_defaults
+
+    parser = mujoco_medium.make_parser()
+    state_defaults(parser, mujoco_medium.build, ["--algo", algo, "--help"])
+    text = " ".join(parser.format_help().split())
+    assert f"the fields of {algo}'s config" in text and "--gamma GAMMA" in text

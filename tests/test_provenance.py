@@ -12,7 +12,7 @@ from offrl_jax.run.study import Study, Variant
 
 def test_config_json_holds_the_resolved_config_and_round_trips(tiny_dataset):
     study = Study(name="t", dataset="hopper-medium", env="hopper", seeds=(0,), updates=20_000, eval_every=1_000,
-                  variants=(Variant.of("default", "td3bc"), Variant.of("a2.5", "td3bc", alpha=2.5)))
+                  variants=(Variant.of("default", "td3bc", "hopper"), Variant.of("a2.5", "td3bc", "hopper", alpha=2.5)))
     text = study.record_json(tiny_dataset)
     raw = json.loads(text)
     assert Study.from_json(text) == study  # what the run wrote about itself does not change the study
@@ -77,7 +77,8 @@ def test_resolve_applies_its_layers_in_order_and_says_where_each_value_came_from
 
 def test_config_json_records_where_each_value_came_from_and_an_older_one_still_reads(tiny_dataset):
     study = Study(name="t", dataset="hopper-medium", env="hopper", seeds=(0,), updates=20_000, eval_every=1_000,
-                  variants=(Variant("a", "td3bc", (("alpha", 4.0), ("pretrain", "none")), "authors", ("alpha",)),))
+                  variants=(Variant.make("a", "td3bc", "hopper", "hopper-medium", "authors",
+                                         {"alpha": 4.0, "pretrain": "none"}, ("alpha",)),))
     raw = json.loads(study.record_json(tiny_dataset))
     sources = raw["sources"]["a"]
     assert set(sources) == set(raw["resolved"]["a"])  # every field
@@ -85,11 +86,17 @@ def test_config_json_records_where_each_value_came_from_and_an_older_one_still_r
         ("flag", "study", "preset", "default")
     assert raw["resolved"]["a"]["init"] == "torch"
     assert Study.from_json(json.dumps(raw)) == study
-    # a config.json written before variants recorded their preset and flags, and before `sources`
+    assert raw["variants"] == [{"label": "a", "algo": "td3bc", "preset": "authors", "env": "hopper",
+                                "dataset": "hopper-medium"}]  # its config is `resolved`
+    # a config.json written before variants carried their config (overrides, preset, flags): resolved as then
+    older = dict(raw, variants=[{"label": "a", "algo": "td3bc", "overrides": [["alpha", 4.0], ["pretrain", "none"]],
+                                 "preset": "authors", "flags": ["alpha"]}])
+    assert Study.from_json(json.dumps(older)) == study
+    # ... and before variants recorded their preset and flags, and before `sources`
     old = dict(raw, variants=[{"label": "a", "algo": "td3bc", "overrides": [["alpha", 4.0], ["pretrain", "none"]]}])
     del old["sources"]
     before = Study.from_json(json.dumps(old))
-    assert before.variants[0].flags is None and before.config("a").alpha == 4.0
+    assert before.config("a").alpha == 4.0 and before.config("a").init != "torch"  # no preset then
     assert before.sources()["a"]["alpha"] == "variant" and before.sources()["a"]["lam"] == "default"
 
 
@@ -104,7 +111,8 @@ def test_fingerprint_tells_datasets_apart(tiny_dataset):
 
 def test_summary_carries_the_resolved_config(tmp_path, tiny_dataset):
     study = Study(name="t", dataset="hopper-medium", env="hopper", seeds=(0,), updates=200, eval_every=100,
-                  variants=(Variant.of("scratch", "td3bc", pretrain="none", hidden=(16, 16)),), eval_episodes=1)
+                  variants=(Variant.of("scratch", "td3bc", "hopper", pretrain="none", hidden=(16, 16)),),
+                  eval_episodes=1)
     summary = run_study(study, tmp_path, tiny_dataset, progress=False)
     saved = json.loads((tmp_path / "config.json").read_text())
     in_summary = json.loads(json.dumps(summary[0]["config"]))

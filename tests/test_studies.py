@@ -21,7 +21,7 @@ def test_main_job_default():
     assert study.dataset == "hopper-medium" and labels(study) == ["pretrained", "scratch"]
     assert study.reference == "scratch" and study.seeds == (0, 1, 2, 3, 4) and study.updates == 40_000
     assert study.eval_every == 2_500 and study.eval_episodes == 5
-    assert dict(study.variants[0].overrides)["pretrain"] == "actor+critic"
+    assert study.variants[0].given()["pretrain"] == "actor+critic"
 
 
 def test_ablation_layernorm_lambda_qtransformer():
@@ -31,22 +31,22 @@ def test_ablation_layernorm_lambda_qtransformer():
     lam = build(lambda_sweep, [])[0]
     assert labels(lam) == ["lambda=0", "lambda=0.1", "lambda=0.5", "lambda=1", "scratch"]
     qt = build(qtransformer, [])[0]
-    assert dict(qt.variants[1].overrides)["target"] == "max_mc"
+    assert qt.variants[1].given()["target"] == "max_mc"
 
 
 def test_figure2_and_replay():
     fig = build(figure2, [])
     assert len(fig) == 6
     edac = [s for s in fig if s.name == "figure2-walker2d-edac"][0]
-    pretrained, scratch = (dict(v.overrides) for v in edac.variants)
+    pretrained, scratch = (v.given() for v in edac.variants)
     assert edac.updates == 16_000 and edac.eval_every == 1_000 and pretrained["num_critics"] == 10
     assert pretrained["pretrain_updates"] == 12_000 and pretrained["actor_pretrain_fraction"] == 0.25
     assert "pretrain_updates" not in scratch  # the EDAC pre-training defaults go to the pre-trained arm only
     reordered = {s.name: s for s in build(figure2, ["--algos", "edac", "td3bc", "--envs", "hopper",
                                                     "--pretrain-updates", "6000"])}
     td3bc = reordered["figure2-hopper-td3bc"]
-    assert td3bc.updates == 30_000 and dict(td3bc.variants[0].overrides).get("num_critics") is None
-    assert dict(reordered["figure2-hopper-edac"].variants[0].overrides)["pretrain_updates"] == 6000  # flag wins
+    assert td3bc.updates == 30_000 and td3bc.variants[0].given().get("num_critics") is None
+    assert reordered["figure2-hopper-edac"].variants[0].given()["pretrain_updates"] == 6000  # flag wins
     assert [s.dataset for s in build(replay, [])] == ["hopper-medium-replay"]
     assert [s.dataset for s in build(replay, ["--levels", "medium-replay", "full-replay"])] == [
         "hopper-medium-replay", "hopper-full-replay"]
@@ -69,9 +69,11 @@ def test_figure2_runs_awac_with_its_twin_critics_whatever_edacs_ensemble():
     assert awac.config("pretrained").num_critics == 2 and awac.config("scratch").awac_lambda == 0.3333
 
 
-def test_preset_paper():
-    studies = build(mujoco_medium, ["--preset", "paper"])
+def test_study_paper():
+    studies = build(mujoco_medium, ["--study", "paper"])
     assert len(studies) == 6 and all(s.updates == 1_000_000 for s in studies)
+    assert {(s.env, s.variants[0].algo) for s in studies} == {(e, a) for e in ("hopper", "halfcheetah", "walker2d")
+                                                              for a in ("td3bc", "edac")}
 
 
 @pytest.mark.parametrize("module, argv", [
@@ -89,10 +91,15 @@ def test_a_study_does_not_accept_a_flag_it_would_ignore(module, argv, capsys):
     assert e.value.code == 2 and capsys.readouterr().err.startswith("error: unrecognized arguments")
 
 
-def test_only_the_main_job_has_the_paper_preset(capsys):
+@pytest.mark.parametrize("module, argv, refusal", [
+    (figure2, ["--study", "paper"], "unrecognized arguments: --study paper"),  # the main job's only
+    (mujoco_medium, ["--preset", "paper"], "invalid choice: 'paper'"),  # a whole study is no table of values
+])
+def test_a_whole_study_is_the_main_jobs_study_not_a_preset(module, argv, refusal, capsys):
     with pytest.raises(SystemExit) as e:
-        figure2.main(["--preset", "paper"])
-    assert e.value.code == 2 and "invalid choice: 'paper'" in capsys.readouterr().err
+        module.main(argv)
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and refusal in err and len(err.strip().splitlines()) == 1
 
 
 def test_the_main_job_declares_its_default_preset():
@@ -108,23 +115,23 @@ def test_the_main_job_declares_its_default_preset():
     assert "alpha" not in build(mujoco_medium, ["--algo", "edac"])[0].sources()["scratch"]  # TD3+BC's only
     args = mujoco_medium.make_parser().parse_args([])
     assert args.preset is None and mujoco_medium.given(args) == {}  # not a parsed flag: --config replays nothing
-    with pytest.raises(UsageError, match="one config preset at a time"):
+    with pytest.raises(SystemExit):  # one table of values at a time
         build(mujoco_medium, ["--preset", "authors", "published"])
 
 
-def test_preset_paper_refuses_the_flags_it_sets():
-    with pytest.raises(UsageError, match="--preset paper sets --env, --updates itself"):
-        build(mujoco_medium, ["--preset", "paper", "--env", "walker2d", "--updates", "1000"])
+def test_study_paper_refuses_the_flags_it_sets():
+    with pytest.raises(UsageError, match="--study paper sets --env, --updates itself"):
+        build(mujoco_medium, ["--study", "paper", "--env", "walker2d", "--updates", "1000"])
     # a flag typed with its default value is typed too (the command line says which were typed)
     from tests.entry import run_module
-    result = run_module("experiments.mujoco_medium", "--preset", "paper", "--updates", "40000")
-    assert result.returncode == 2 and "--preset paper sets --updates itself; leave it out" in result.stderr
+    result = run_module("experiments.mujoco_medium", "--study", "paper", "--updates", "40000")
+    assert result.returncode == 2 and "--study paper sets --updates itself; leave it out" in result.stderr
 
 
 def test_figure2_num_critics_is_edac_only():
     studies = {s.name: s for s in build(figure2, ["--envs", "hopper", "--num-critics", "4"])}
-    assert all("num_critics" not in dict(v.overrides) for v in studies["figure2-hopper-td3bc"].variants)
-    assert all(dict(v.overrides)["num_critics"] == 4 for v in studies["figure2-hopper-edac"].variants)
+    assert all("num_critics" not in v.given() for v in studies["figure2-hopper-td3bc"].variants)
+    assert all(v.given()["num_critics"] == 4 for v in studies["figure2-hopper-edac"].variants)
 
 
 def test_alpha_sweep_builds_one_variant_per_value_and_groups_them():

@@ -127,7 +127,6 @@ def test_config_takes_json_forms_and_stores_the_declared_types(algo, overrides, 
     ({"env": None}, "Study.env = None must be a string"),
     ({"reference": 0}, "Study.reference = 0 must be a variant label or None"),
     ({"variants": ("td3bc",)}, "Study.variants = ('td3bc',) must be a tuple of Variant"),
-    ({"variants": (Variant.of("a", "td3bc", alpha=True),)}, "TD3BCConfig.alpha = True must be a number"),
 ])
 def test_study_rejects(fields, message):
     """(A study's name names its folder in a multi-study run: "../elsewhere" or "/abs" would write outside it.)"""
@@ -140,11 +139,16 @@ def test_study_rejects(fields, message):
 @pytest.mark.parametrize("make, message", [
     (lambda: Variant.of("", "td3bc"), "Variant.label = '' must be a non-empty name"),
     (lambda: Variant.of("  ", "td3bc"), "Variant.label = '  ' must be a non-empty name"),
-    (lambda: Variant(None, "td3bc"), "Variant.label = None must be a non-empty name"),
+    (lambda: Variant.of(None, "td3bc"), "Variant.label = None must be a non-empty name"),
     (lambda: Variant.of("a/b", "td3bc"), "Variant.label = 'a/b' must be a non-empty name without /"),
     (lambda: Variant.of("..", "td3bc"), "Variant.label = '..' must be a non-empty name without /"),
-    (lambda: Variant("a", "td3bc", (("alpha",),)), "Variant.overrides = (('alpha',),) must be (name, value) pairs"),
-    (lambda: Variant("a", "td3bc", ((1, 2.5),)), "Variant.overrides = ((1, 2.5),) must be (name, value) pairs"),
+    (lambda: Variant.of("a", "td3bc", alpha=True), "TD3BCConfig.alpha = True must be a number"),
+    (lambda: Variant("a", "td3bc", {"alpha": 2.5}), "Variant.config = {'alpha': 2.5} must be a TD3BCConfig"),
+    # a config.json written before variants carried their config: its overrides, checked by the converter
+    (lambda: Variant.from_json({"label": "a", "algo": "td3bc", "overrides": [["alpha"]]}, {}, "hopper", ""),
+     "variant 'a': overrides = [['alpha']] must be (name, value) pairs"),
+    (lambda: Variant.from_json({"label": "a", "algo": "td3bc", "overrides": [[1, 2.5]]}, {}, "hopper", ""),
+     "variant 'a': overrides = [[1, 2.5]] must be (name, value) pairs"),
 ])
 def test_variant_rejects(make, message):
     with pytest.raises(ValueError) as err:
@@ -157,7 +161,7 @@ def test_study_stores_json_lists_as_tuples():
     study = Study(name="s", dataset="hopper-medium", env="hopper", variants=list(variants), seeds=[0, 1],
                   final_window=[100, 300], updates=20_000)
     assert study.variants == variants and study.seeds == (0, 1) and study.final_window == (100, 300)
-    assert study.variants[1].overrides == (("alpha", 2), ("hidden", (8, 8)))
+    assert study.variants[1].given() == {"alpha": 2.0, "hidden": (8, 8)}
     assert Study.from_json(study.to_json()) == study and hash(Study.from_json(study.to_json())) == hash(study)
 
 
@@ -195,7 +199,7 @@ def test_a_studys_budget_check_builds_no_algorithm(monkeypatch):
     for family in FAMILIES.values():
         monkeypatch.setattr(family.algorithm, "__init__", lambda *a, **k: pytest.fail("an algorithm was built"))
     study = Study(name="t", dataset="hopper-medium", env="hopper", seeds=(0,), updates=30_000, eval_every=1_000,
-                  variants=(Variant.of("a", "td3bc"), Variant.of("b", "edac"), Variant.of("c", "rebrac")))
+                  variants=(Variant.of("a", "td3bc"), Variant.of("b", "edac", "hopper"), Variant.of("c", "rebrac")))
     assert study.config("b").num_critics == 50
     with pytest.raises(ValueError, match="phase 'offline_rl' updates the actor once every 2 critic updates"):
         Study(name="t", dataset="hopper-medium", env="hopper", seeds=(0,), updates=10_000, eval_every=1_001,
@@ -212,3 +216,12 @@ def test_each_family_builds_its_layers_from_its_own_fields():
     assert make_config("edac", "hopper", preset="authors").arch().hidden_bias == 0.1
     assert make_config("rebrac", "hopper").arch().hidden_bias == 0.1
     assert dataclasses.replace(make_config("rebrac", "hopper"), hidden_bias=None).arch().hidden_bias is None
+
+
+def test_a_study_refuses_a_variant_made_with_another_envs_values():
+    walker = Variant.of("a", "td3bc", "walker2d")
+    with pytest.raises(ValueError) as err:
+        Study(name="s", dataset="hopper-medium", env="hopper", variants=(walker,))
+    assert "variant 'a' has walker2d's values, and the study is on hopper" in str(err.value)
+    assert "\n" not in str(err.value)
+    Study(name="s", dataset="hopper-medium", env="hopper", variants=(Variant.of("a", "td3bc"),))  # no env's: taken

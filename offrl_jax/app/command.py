@@ -15,9 +15,10 @@
 Expected failures (bad flags, bad data, an unwritable place, divergence) print one line, `error: ...`, and exit 2
 (3 for divergence); `OFFRL_JAX_DEBUG=1` re-raises them with the traceback instead.
 
-Over 400 lines for a stated reason: the seven steps share one `Command`'s state (the studies, the claimed directory,
+Over 300 lines for a stated reason: the seven steps share one `Command`'s state (the studies, the claimed directory,
 the lock, what an --overwrite set aside) and its clean-up on every exit path; split, each step would take and return
-that state and the clean-up would be spread over files. The step bodies call out to app/ and run/ for their parts.
+that state and the clean-up would be spread over files. The step bodies call out to app/ and run/ for their parts
+(a saved run's replay and extension: `offrl_jax.app.replay`).
 """
 from __future__ import annotations
 
@@ -41,10 +42,11 @@ from offrl_jax.app.outputs import (
     saved_studies,
     studies_json,
 )
+from offrl_jax.app.replay import RUN_FIELDS, extend, recorded_parallel, replay
 from offrl_jax.data import catalogue
 from offrl_jax.data.dataset import DatasetError
 from offrl_jax.data.device import too_few_rows
-from offrl_jax.run.provenance import fingerprint, recorded_command, recorded_data
+from offrl_jax.run.provenance import fingerprint, recorded_data
 from offrl_jax.run.resume import check_resume, edited_resolved
 from offrl_jax.run.runner import Diverged, run_study
 from offrl_jax.run.study import Study
@@ -59,9 +61,6 @@ _UNSET = object()
 PROCESS_FLAGS = frozenset({"processes", "distributed", "coordinator", "num_processes", "process_id"})
 RESUME_FLAGS = frozenset({"resume", "updates", "parallel", "no_progress", "clip_actions", "logger", "dry_run",
                           *PROCESS_FLAGS})
-# run flag destination -> the Study field it sets (seeds and --dataset-path are mapped in `replay`)
-RUN_FIELDS = ("updates", "eval_every", "eval_episodes", "batch_size", "checkpoint_every", "keep_checkpoints",
-              "max_transitions", "clip_actions")
 REPLAY_FLAGS = frozenset({"config", "out", "overwrite", "parallel", "no_progress", "logger", "dry_run", "seeds",
                           "seed_offset",
                           "dataset_path", *RUN_FIELDS, *PROCESS_FLAGS})
@@ -81,52 +80,6 @@ def given_dests(parser: argparse.ArgumentParser, argv=None) -> set[str]:
 def _flags(parser: argparse.ArgumentParser, dests) -> str:
     names = {a.dest: a.option_strings[0] for a in parser._actions if a.option_strings}
     return ", ".join(names.get(d, d) for d in sorted(dests))
-
-
-def extend(saved: Study | list[Study], updates: int) -> Study | list[Study]:
-    """The saved study (or studies) with a larger budget: --resume --updates N continues a run past its end."""
-    studies = saved if isinstance(saved, list) else [saved]
-    if any(updates < s.updates for s in studies):
-        raise UsageError(f"--updates {updates:,} is less than the saved run's {max(s.updates for s in studies):,}; "
-                         "a resumed run can be extended, not shortened")
-    if updates != max(s.updates for s in studies) and any(s.online is not None for s in studies):
-        raise UsageError("--updates: the saved run fine-tunes online after its offline updates, so they cannot be "
-                         "extended on resume; start a new run (or finetune --from a longer offline run)")
-    longer = [dataclasses.replace(s, updates=updates) for s in studies]
-    return longer if isinstance(saved, list) else longer[0]
-
-
-def replay(saved: Study | list[Study], args, given: set[str], hparams: dict) -> Study | list[Study]:
-    """The saved study (or studies) with the run flags in `given` and the hyper-parameters `hparams` replaced."""
-    swept = sorted(k for k, v in hparams.items() if isinstance(v, list))  # `config_values`: a sweep is a list
-    if swept:
-        raise UsageError(f"--config takes one value per hyper-parameter (got several for {', '.join(swept)}); "
-                         "start a new run to sweep")
-    fields = {f: getattr(args, f) for f in RUN_FIELDS if f in given}
-    if "dataset_path" in given:
-        fields["dataset"] = str(args.dataset_path)
-
-    def seeds(study: Study) -> dict:
-        """--seeds / --seed-offset over the saved seeds: the one not given is the saved run's (its count, or its
-        first seed), not the flag's default."""
-        if not given & {"seeds", "seed_offset"}:
-            return {}
-        first = args.seed_offset if "seed_offset" in given else study.seeds[0]
-        return {"seeds": tuple(range(first, first + (args.seeds if "seeds" in given else len(study.seeds))))}
-
-    def one(study: Study) -> Study:
-        for field in hparams:  # the variants were made to differ in it (a sweep, an ablation): their labels say so
-            values = {repr(dict(v.overrides).get(field, "(its default)")): v for v in study.variants}
-            if len(values) > 1:
-                raise UsageError(f"--{field.replace('_', '-')}: the saved run's variants differ in {field} ("
-                                 f"{', '.join(f'{v.label}: {k}' for k, v in values.items())}), so one value for all "
-                                 "would leave their labels false; start a new run to compare other values")
-        variants = tuple(dataclasses.replace(v, overrides=tuple(sorted((dict(v.overrides) | hparams).items())),
-                                             flags=None if v.flags is None else (*v.flags, *hparams))
-                         for v in study.variants)
-        return dataclasses.replace(study, variants=variants, **fields, **seeds(study))
-
-    return [one(s) for s in saved] if isinstance(saved, list) else one(saved)
 
 
 def load_data(study: Study, clip_actions: bool = False):
@@ -359,28 +312,6 @@ class Command:
         return failed
 
 
-def recorded_parallel(config_path: Path, prog: str, default: int, depth: int = 0) -> int | None:
-    """The --parallel of a run's last start or resume by command `prog` (`default` where it was not given, or the
-    --parallel of the run its --config replayed, which it took; None: not recorded, or started otherwise, say by
-    `run_study` from Python, or replaying a run no longer where it was)."""
-    words = recorded_command(config_path)
-    if words is None or words[1:3] != ["-m", prog]:
-        return None
-    flag = lambda name: next((w.split("=", 1)[1] if "=" in w else nxt  # noqa: E731
-                              for w, nxt in zip(words, words[1:] + [""]) if w == name or w.startswith(name + "=")),
-                             None)
-    value = flag("--parallel")
-    if value is None and (replayed := flag("--config")):
-        path = Path(replayed) / "config.json" if Path(replayed).is_dir() else Path(replayed)
-        if not path.is_absolute() or not path.is_file() or depth > 8:
-            return None
-        return recorded_parallel(path, prog, default, depth + 1)
-    try:
-        return default if value is None else int(value)
-    except ValueError:
-        return None
-
-
 def interrupted_line(command: Command) -> str:
     """What an interrupted command says: how to resume the run it leaves, or that the earlier run is back."""
     out = command.out
@@ -402,7 +333,7 @@ def run_command(build: Build, parser: argparse.ArgumentParser, argv=None,
 
     For --config: `hparam_dests` are the flags that set single hyper-parameters, and `hparams(args)` the overrides
     they make ({config field: value}, None for a flag not given)."""
-    state_defaults(parser, build)  # --help's "Default:" of each hyper-parameter: what the study gives it
+    state_defaults(parser, build, argv)  # --help: the --algo's hyper-parameters, each with what the study gives it
     command = Command(parser.parse_args(argv), parser, argv)
     one_line_warnings()
     ok, code = False, 1

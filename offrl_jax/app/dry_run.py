@@ -4,15 +4,19 @@
 resolved config, every field with its value (as config.json's `resolved` records it) and where it came from (as its
 `sources` does: `offrl_jax.algos.SOURCES`).  Nothing is written, loaded or trained: the dataset's env is the study's.
 
-`state_defaults`: the "Default:" of each hyper-parameter flag in `--help`, read from the studies the command builds
-with no flags (and with each other `--env`): the value its variants get, per env where it differs.
+`state_defaults`: the hyper-parameter flags `--help` lists, those of the --algo given (else of the default one),
+each with its family's help text and, as "Default:", the value the study's variants get: read from the studies the
+command builds with that --algo and no other flag (and with each other `--env`), per env where it differs.
 """
 from __future__ import annotations
 
 import argparse
 import json
+import sys
 from collections.abc import Callable
 
+from offrl_jax.algos import ALGOS
+from offrl_jax.app.flags import algo_in, show_family
 from offrl_jax.run.study import Study
 from offrl_jax.system.cli import UsageError
 
@@ -47,13 +51,28 @@ def describe(studies: list[Study]) -> str:
     return "\n".join(lines)
 
 
-def state_defaults(parser: argparse.ArgumentParser, build: Callable) -> None:
-    """Have `parser`'s help state, for each flag that sets a config field, the value the study gives it by default
-    (its default env first, the other envs where they differ); worked out when the help is shown."""
+def state_defaults(parser: argparse.ArgumentParser, build: Callable, argv: list[str] | None = None) -> None:
+    """Have `parser`'s help list the hyper-parameters of the algorithm --algo names in `argv` (else the default
+    one's; a study without --algo: every family's) and state, for each, the value the study gives it by default (its
+    default env first, the other envs where they differ); worked out when the help is shown."""
     format_help = parser.format_help
 
     def stated() -> str:
-        defaults = field_defaults(parser, build)
+        one = any(a.dest == "algo" and a.option_strings for a in parser._actions)  # the study trains one --algo
+        algo = algo_in(sys.argv[1:] if argv is None else list(argv)) if one else None
+        shown = algo or (parser.get_default("algo") if one else None)
+        family = ALGOS[shown].family if shown in ALGOS else None
+        show_family(parser, family)
+        try:
+            defaults = field_defaults(parser, build, ["--algo", algo] if algo in ALGOS else [])
+        except (UsageError, ValueError):  # it needs other flags too (bc: --pretrain actor): its config's own
+            defaults = {}
+        for group in parser._action_groups:
+            if group.title == "hyper-parameters" and family is not None:
+                group.description = (f"the fields of {shown}'s config ({family} family, "
+                                     f"offrl_jax/algos/{family}.py); --algo X --help lists X's.  Not given = what the "
+                                     "study gives it (each Default below; --dry-run shows every value and where it "
+                                     "came from); a field the algorithm does not have is refused")
         for action in parser._actions:
             if action.dest in defaults and action.help and "Default: " in action.help:
                 action.help = action.help[:action.help.rindex("Default: ")] + "Default: " + defaults[action.dest]
@@ -68,9 +87,10 @@ def _studies(parser: argparse.ArgumentParser, build: Callable, argv: list[str]) 
     return built if isinstance(built, list) else [built]
 
 
-def field_defaults(parser: argparse.ArgumentParser, build: Callable) -> dict[str, str]:
-    """{field: its default as --help states it}: over the studies built with no flags and with each other --env; a
-    field their algorithms do not have, over those built with each other --algo ("with --algo edac: ...")."""
+def field_defaults(parser: argparse.ArgumentParser, build: Callable, argv: list[str] = ()) -> dict[str, str]:
+    """{field: its default as --help states it}: over the studies built with `argv` (an --algo) and no other flag,
+    and with each other --env; without `argv`, a field their algorithms do not have, over those built with each
+    other --algo ("with --algo edac: ...")."""
     options = {a.dest: a.choices or () for a in parser._actions if a.dest in ("env", "algo", "algos")
                and a.option_strings}
     algo_flag = "--algos" if "algos" in options else "--algo"
@@ -94,7 +114,9 @@ def field_defaults(parser: argparse.ArgumentParser, build: Callable) -> dict[str
                         value, sources[v.label][name], v.preset)
         return values
 
-    stated = {name: _stated(per_env) for name, per_env in found([]).items()}
+    stated = {name: _stated(per_env) for name, per_env in found(list(argv)).items()}
+    if argv:
+        return stated
     default_algos = parser.get_default(algo_flag[2:])
     others: dict[str, dict[str, str]] = {}  # {field: {algo: stated}} for the fields the default algorithms lack
     for algo in options.get("algo", options.get("algos", ())):

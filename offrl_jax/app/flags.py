@@ -92,8 +92,11 @@ def _fields(configs: tuple[type, ...] = CONFIGS) -> dict[str, dict[str, Any]]:
                                  f"{f.name} is {entry['type']}: one --{f.name.replace('_', '-')} flag cannot parse "
                                  "both; give the field another name")
             entry["defaults"][_family_name(cls)] = f.default
+            entry.setdefault("comments", {})[_family_name(cls)] = comments.get(f.name, "")
             entry["comment"] = entry["comment"] or comments.get(f.name, "")
             entry["sweepable"] |= f.name in getattr(cls, "SWEEPABLE", ())
+            if f.name in getattr(cls, "SWEEPABLE", ()):
+                entry.setdefault("swept_in", set()).add(_family_name(cls))
     return found
 
 
@@ -132,14 +135,39 @@ def add_config_flags(parser: argparse.ArgumentParser, omit: typing.Iterable[str]
         defaults = entry["defaults"]
         shown = (f"{next(iter(defaults.values()))!r}" if len(set(map(repr, defaults.values()))) == 1 else
                  ", ".join(f"{family} {value!r}" for family, value in defaults.items()))
-        text = entry["comment"] + (". " if entry["comment"] else "")
-        if entry["sweepable"]:
-            text += "Several values = a sweep, vmapped in one program. "
-        text += f"Default: {shown}"
-        group.add_argument(f"--{name.replace('_', '-')}", *ALIASES.get(name, ()), dest=name, default=None,
-                           help=text.replace("%", "%%"), **_argument(name, entry["type"], entry["sweepable"]))
+        def text(comment: str, default: str, sweep: bool = entry["sweepable"]) -> str:
+            return ((comment + ". " if comment else "") + ("Several values = a sweep, vmapped in one program. "
+                                                           if sweep else "") + f"Default: {default}").replace("%", "%%")
+
+        action = group.add_argument(f"--{name.replace('_', '-')}", *ALIASES.get(name, ()), dest=name, default=None,
+                                    help=text(entry["comment"], shown),
+                                    **_argument(name, entry["type"], entry["sweepable"]))
+        # each family's own help for the field (`show_family`): its comment, its dataclass default
+        action.family_help = {family: text(comment or entry["comment"], repr(defaults[family]),
+                                           family in entry.get("swept_in", ()))
+                              for family, comment in entry["comments"].items()}
         dests.append(name)
     return tuple(dests)
+
+
+def show_family(parser: argparse.ArgumentParser, family: str | None) -> None:
+    """Have `parser`'s hyper-parameter flags in --help be those of `family` (`FAMILIES`) with its help texts and
+    defaults, the others hidden (None: every family's, as they were added)."""
+    for action in parser._actions:
+        if not hasattr(action, "family_help"):
+            continue
+        if not hasattr(action, "all_help"):
+            action.all_help = action.help
+        action.help = action.all_help if family is None else action.family_help.get(family, argparse.SUPPRESS)
+
+
+def algo_in(argv: list[str]) -> str | None:
+    """The algorithm the last --algo in `argv` names (None: no --algo)."""
+    algo = None
+    for word, after in zip(argv, [*argv[1:], ""]):
+        if word == "--algo" or word.startswith("--algo="):
+            algo = word.split("=", 1)[1] if "=" in word else after
+    return algo
 
 
 def sweepable_fields() -> frozenset[str]:

@@ -29,12 +29,12 @@ LABELS = {"actor+critic": "pretrained", "none": "scratch", "actor": "actor-only"
 
 
 def parser(prog: str, doc: str, updates: int = 100_000,
-           eval_every: int = 5_000, env: str = "hopper", omit: tuple[str, ...] = (), preset: bool = False,
+           eval_every: int = 5_000, env: str = "hopper", omit: tuple[str, ...] = (),
            seeds: int = 3, eval_episodes: int = 10, default_preset: str | None = None,
            online: bool = False, adroit: bool = False) -> argparse.ArgumentParser:
     """The flags every MuJoCo study shares; studies pass their own defaults, leave out the flags they set
-    themselves (`omit`: destinations, e.g. ("pretrain", "lam")), and only the main job has `--preset paper`
-    (`preset`); `default_preset` names the config preset the study applies when no --preset is given; the config
+    themselves (`omit`: destinations, e.g. ("pretrain", "lam")); `default_preset` names the config preset the study
+    applies when no --preset is given; the config
     fields only an online phase reads (`ONLINE_FIELDS`) are flags of a study with one (`online`); a study with
     `adroit` also takes door-human and door-cloned (`--env door --level human|cloned`; `check_level`).  Each
     hyper-parameter's stated default is the study's own, read from what it builds when its help is shown
@@ -69,14 +69,8 @@ def parser(prog: str, doc: str, updates: int = 100_000,
                     "paper's per-env values.  " if "published" in PRESETS else "")
     help_default += (f"Default: {default_preset}" if default_preset else
                      "Default: none (each value is the per-env table's or the config's)")
-    if preset:
-        add("--preset", nargs="+", choices=("paper", *PRESETS), default=None,
-            help="paper: 3 envs x {td3bc, edac} medium x --seeds seeds x 1M updates (evaluation every 10k), "
-                 "each in its own sub-directory; --env/--algo/--level/--updates/--eval-every other than their "
-                 "defaults are refused.  " + help_authors + ".  paper may be given with one other.  "
-                 + help_default)
-    else:
-        add("--preset", nargs=1, choices=tuple(PRESETS), default=None, help=help_authors + ".  " + help_default)
+    add("--preset", nargs=1, choices=tuple(PRESETS), default=None,
+        help="a table of values for every variant.  " + help_authors + ".  " + help_default)
     p.set_defaults(default_preset=default_preset)
     add_config_flags(p, tuple(omit) + (() if online else tuple(ONLINE_FIELDS)))
     run_args(p, updates=updates, eval_every=eval_every, seeds=seeds, eval_episodes=eval_episodes)
@@ -104,11 +98,8 @@ SWEPT = tuple(sorted(sweepable_fields()))  # flags that take several values (a s
 def given(args) -> dict:
     """The hyper-parameters set on the command line (the rest take the per-env defaults); a swept flag given one
     value is that value, given several it stays a list (see `sweep_variants`)."""
-    values = overrides(args)
-    config_presets = [p for p in getattr(args, "preset", None) or [] if p in PRESETS]
-    if len(config_presets) > 1:
-        raise UsageError(f"--preset {' '.join(config_presets)}: one config preset at a time")
-    return values | ({"preset": config_presets[0]} if config_presets else {})
+    preset = getattr(args, "preset", None)  # nargs=1: a list of one name, or None
+    return overrides(args) | ({"preset": preset[0]} if preset else {})
 
 
 def chosen(args) -> dict:
@@ -117,37 +108,49 @@ def chosen(args) -> dict:
     return ({"preset": default} if default and not getattr(args, "preset", None) else {}) | given(args)
 
 
-def sweep_variants(label: str, algo: str, fixed: dict, flags: frozenset[str] = frozenset()) -> tuple[Variant, ...]:
-    """One variant, or one per value of a swept flag (labels "pretrained alpha=2.5", ...); the runner trains a
-    sweep's variants as one program.  A "preset" entry of `fixed` is the variants' config preset, applied under the
-    other entries; the entries named in `flags` were given on the command line (the rest are the study's own)."""
+def sweep_variants(label: str, algo: str, fixed: dict, flags: frozenset[str] = frozenset(), env: str = "",
+                   dataset: str = "") -> tuple[Variant, ...]:
+    """One variant, or one per value of a swept flag (labels "pretrained alpha=2.5", ...), resolved on `env` and
+    `dataset`; the runner trains a sweep's variants as one program.  A "preset" entry of `fixed` is the variants'
+    config preset, applied under the other entries; the entries named in `flags` were given on the command line (the
+    rest are the study's own)."""
     fixed = dict(fixed)
     preset = fixed.pop("preset", None)
     swept = [k for k in SWEPT if isinstance(fixed.get(k), list)]
-    if not swept:
-        return (Variant(label, algo, tuple(sorted(fixed.items())), preset, tuple(flags)),)
     if len(swept) > 1:
         raise ValueError(f"sweep one hyper-parameter at a time, got several values for {' and '.join(swept)}")
-    name = swept[0]
-    return tuple(Variant(f"{label} {name}={value:g}", algo, tuple(sorted((fixed | {name: value}).items())), preset,
-                         tuple(flags)) for value in fixed[name])
+    points = [(f"{label} {swept[0]}={value:g}", fixed | {swept[0]: value}) for value in fixed[swept[0]]] \
+        if swept else [(label, fixed)]
+    return tuple(Variant.make(name, algo, env, dataset, preset, values, flags) for name, values in points)
 
 
-def study_variants(label: str, algo: str, own: dict, args, fixed: dict | None = None) -> tuple[Variant, ...]:
-    """`sweep_variants` of the study's own values `own` under the flags given (`chosen(args)`, which win), and
-    `fixed`, values of the study's that no flag changes (they win over the flags)."""
-    fixed = fixed or {}
-    return sweep_variants(label, algo, own | chosen(args) | fixed, frozenset(overrides(args)) - fixed.keys())
+def study_variants(label: str, algo: str, own: dict, args, fixed: dict | None = None, env: str | None = None,
+                   drop: tuple[str, ...] = ()) -> tuple[Variant, ...]:
+    """`sweep_variants` of the study's own values `own` under the flags given (`chosen(args)`, which win, but those
+    named in `drop`), and `fixed`, values of the study's that no flag changes (they win over the flags); on `env`
+    (default --env) and the dataset the study trains on there (`dataset_of`)."""
+    fixed, env = fixed or {}, env or args.env
+    flags = {k: v for k, v in chosen(args).items() if k not in drop}
+    return sweep_variants(label, algo, own | flags | fixed, frozenset(overrides(args)) - fixed.keys() - set(drop),
+                          env, dataset_of(env, args))
 
 
-def pretrain_variants(algo: str, modes, args) -> tuple[Variant, ...]:
-    return tuple(v for mode in modes for v in study_variants(LABELS[mode], algo, {"pretrain": mode}, args))
+def pretrain_variants(algo: str, modes, args, env: str | None = None, own: dict | None = None,
+                      drop: tuple[str, ...] = ()) -> tuple[Variant, ...]:
+    """One variant per pre-training mode (`study_variants`; `own`: the study's other values for them)."""
+    return tuple(v for mode in modes for v in study_variants(LABELS[mode], algo, (own or {}) | {"pretrain": mode},
+                                                             args, env=env, drop=drop))
+
+
+def dataset_of(env: str, args) -> str:
+    """The dataset a study on `env` trains on: --dataset-path, or <env>-<level> (`check_level`)."""
+    return args.dataset_path or f"{env}-{check_level(env, getattr(args, 'level', 'medium'), args)}"
 
 
 def make_study(env: str, algo: str, level: str, args, extra: dict | None = None,
                variants: tuple[Variant, ...] | None = None, reference: str | None = None, name: str = "") -> Study:
     if variants is None:
-        variants = pretrain_variants(algo, args.pretrain, args)
+        variants = pretrain_variants(algo, args.pretrain, args, env)
         reference = LABELS["none"] if "none" in args.pretrain else None
     fields = study_fields(args) | (extra or {})
     if args.dataset_path and "level" in getattr(args, "typed", ()):  # flags that would be ignored are refused
@@ -159,7 +162,7 @@ def make_study(env: str, algo: str, level: str, args, extra: dict | None = None,
     study = Study(name=name or f"{data_name}-{algo}", dataset=dataset, env=env, variants=variants,
                   reference=reference, **fields)
     for v in study.variants:
-        auto_only = sorted({"pretrain_auto_window", "pretrain_auto_tol"} & dict(v.overrides).keys())
+        auto_only = sorted({"pretrain_auto_window", "pretrain_auto_tol"} & v.given().keys())
         if auto_only and not study.config(v.label).pretrain_auto:
             raise UsageError(f"{', '.join('--' + f.replace('_', '-') for f in auto_only)} applies only to "
                              "--pretrain-updates auto[:CAP]; give that too, or leave it out")

@@ -81,7 +81,7 @@ def group_identity(study: Study, group: tuple[Variant, ...], data_sha256: str) -
     phase (`Study.start_from`)."""
     resolved = study.resolved()
     offline = lambda pairs: [list(o) for o in pairs if o[0] not in ONLINE_FIELDS]  # noqa: E731
-    identity = {"variants": [[v.label, v.algo, offline(v.overrides)] for v in group],
+    identity = {"variants": [[v.label, v.algo, offline(sorted(v.given().items()))] for v in group],
                 "resolved": [{k: x for k, x in resolved[v.label].items() if k not in ONLINE_FIELDS} for v in group],
                 "seeds": list(study.seeds),
                 "batch_size": study.batch_size, "env": study.env, "data": data_sha256,
@@ -160,13 +160,15 @@ def checkpoint_differences(payload: dict, study: Study, group: tuple[Variant, ..
 
 
 def resolved_differences(study: Study, config_path: Path) -> list[str]:
-    """Where the `resolved` section of a run's config.json differs from what `study`'s variants resolve to now
-    ("label.field saved -> now"); a field only one of them has is no difference (it was added or removed since)."""
+    """Where the `resolved` section of a run's config.json differs from what `study`'s variants resolve to now from
+    the values given them, their preset and the tables ("label.field saved -> now"): a value edited by hand, which its
+    recorded source does not give; a field only one of them has is no difference (it was added or removed since)."""
     try:
         saved = json.loads(config_path.read_text()).get("resolved") or {}
     except (OSError, ValueError, AttributeError):
         return []  # a config.json that cannot be read was refused when the study was read from it
-    now = json.loads(json.dumps(study.resolved(), default=list))
+    now = {v.label: dataclasses.asdict(v.again().config) for v in study.variants}
+    now = json.loads(json.dumps(now, default=list))
     return [f"{label}.{key} {value!r} -> {now[label][key]!r}"
             for label, values in saved.items() if isinstance(values, dict) and label in now
             for key, value in values.items() if key in now[label] and value != now[label][key]]

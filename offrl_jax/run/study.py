@@ -1,4 +1,5 @@
-"""What a study is: variants (an algorithm and its hyper-parameters) on one dataset and env, seeds and budget.
+"""What a study is: variants (`offrl_jax.run.variant`: an algorithm and its resolved config) on one dataset and env,
+seeds and budget.
 
 A `Study` is plain data with its JSON (`config.json`): `to_json`/`from_json` for the study itself, `record_json`
 adding every variant's resolved config and the run records (`offrl_jax.run.provenance`).  `sweep_groups` finds the
@@ -10,56 +11,13 @@ import dataclasses
 import json
 from typing import Any
 
-from offrl_jax.algos import Config, Resolved, family_of, resolve
+from offrl_jax.algos import Config, family_of
 from offrl_jax.data.dataset import Dataset
 from offrl_jax.driver import check_call_grid
 from offrl_jax.envs.registry import get_env_spec
 from offrl_jax.online.config import OnlineConfig
 from offrl_jax.run.provenance import run_record
-
-
-def check_file_name(what: str, value: object) -> None:
-    """Raise ValueError unless `value` can name a file or folder inside a run directory: a non-empty string, one
-    path component (no / or \\, not . or ..), no control characters.  A study's name and a variant's label do;
-    a saved config.json edited to "../elsewhere" must not write outside its run."""
-    if (not isinstance(value, str) or not value.strip() or value in (".", "..") or any(c in value for c in "/\\")
-            or any(ord(c) < 32 or ord(c) == 127 for c in value)):
-        raise ValueError(f"{what} = {value!r} must be a non-empty name without /, \\ or control characters, not . "
-                         "or .. (it names files in the run directory)")
-
-
-@dataclasses.dataclass(frozen=True)
-class Variant:
-    label: str  # unique, used in files: "pretrained", "scratch", "lambda=0.1", ...
-    algo: str
-    overrides: tuple[tuple[str, Any], ...] = ()  # config overrides as (name, value) pairs
-    preset: str | None = None  # the config preset (`offrl_jax.algos.PRESETS`) applied under the overrides
-    # the overrides given on the command line (the rest are the study's own); None: not recorded (a run saved before)
-    flags: tuple[str, ...] | None = ()
-
-    def __post_init__(self):
-        check_file_name("Variant.label", self.label)
-        try:  # as from_json gives them back: (name, value) tuples, a list value as a tuple (hashable, comparable)
-            pairs = tuple((name, tuple(x) if isinstance(x, list) else x) for name, x in self.overrides)
-        except (TypeError, ValueError):
-            pairs = None
-        if pairs is None or not all(isinstance(name, str) for name, _ in pairs):
-            raise ValueError(f"Variant.overrides = {self.overrides!r} must be (name, value) pairs")
-        object.__setattr__(self, "overrides", pairs)
-        if self.preset is not None and not isinstance(self.preset, str):
-            raise ValueError(f"Variant.preset = {self.preset!r} must be a preset's name or None")
-        if self.flags is not None:
-            if isinstance(self.flags, str) or not all(isinstance(name, str) for name in self.flags):
-                raise ValueError(f"Variant.flags = {self.flags!r} must be names of its overrides")
-            object.__setattr__(self, "flags", tuple(sorted(set(self.flags) & {name for name, _ in pairs})))
-
-    @staticmethod
-    def of(label: str, algo: str, **overrides: Any) -> Variant:
-        return Variant(label, algo, tuple(sorted(overrides.items())))
-
-    def resolve(self, env: str, dataset: str = "") -> Resolved:
-        """This variant's config on `env` (and `dataset`) and where each value came from (`offrl_jax.algos.resolve`)."""
-        return resolve(self.algo, env, dataset, self.preset, dict(self.overrides), self.flags)
+from offrl_jax.run.variant import Variant, check_file_name  # noqa: F401  (where a study's users find them)
 
 
 MAX_MEMBERS = 1024  # seeds (x sweep values) trained as one program: ~3 MB each for TD3+BC, ~30 for EDAC on 1M rows
@@ -140,21 +98,18 @@ class Study:
         if self.reference is not None and not any(reference_label(self, label) for label in labels):
             raise ValueError(f"Study.reference = {self.reference!r} is not a variant label ({', '.join(labels)})")
         horizon = get_env_spec(self.env).max_episode_steps
-        # every variant's config, resolved once (registry, per-env defaults, preset, overrides) and checked with its
-        # budget before anything is written; everyone reads it from here (`config`)
-        resolved = {v.label: v.resolve(self.env, self.dataset) for v in self.variants}
-        configs = {label: r.config for label, r in resolved.items()}
-        for label, config in configs.items():
-            planned = config.phases(config.budget(self.updates))
+        for v in self.variants:  # every variant's config, checked with the budget before anything is written
+            if v.env not in ("", self.env):
+                raise ValueError(f"variant {v.label!r} has {v.env}'s values, and the study is on {self.env}: make it "
+                                 f"on {self.env} (Variant.make / Variant.of with env={self.env!r})")
+            planned = v.config.phases(v.config.budget(self.updates))
             check_call_grid(planned, self.eval_every)
             if self.online is not None:
-                self.online.check(label, planned[-1])
+                self.online.check(v.label, planned[-1])
                 self.online.rows(horizon)  # a buffer too small for the env's episodes: refused before any training
-                if (total := config.budget(self.updates) + self.online.updates()) >= 2**31:
-                    raise ValueError(f"variant {label!r}: its offline and online updates ({total:,}) are past what "
+                if (total := v.config.budget(self.updates) + self.online.updates()) >= 2**31:
+                    raise ValueError(f"variant {v.label!r}: its offline and online updates ({total:,}) are past what "
                                      f"the update counter holds (an int32: {2**31 - 1:,})")
-        object.__setattr__(self, "_configs", configs)  # not fields: not in to_json, equality or replace
-        object.__setattr__(self, "_sources", {label: r.sources for label, r in resolved.items()})
         widest = max(len(group) for group, _ in self.groups()) * len(self.seeds)
         if widest > MAX_MEMBERS:
             n = len(self.seeds)
@@ -163,32 +118,41 @@ class Study:
                              "this library trains at once (every member's networks and optimiser state are in memory "
                              "together)")
 
+    def variant(self, label: str) -> Variant:
+        return next(v for v in self.variants if v.label == label)
+
     def config(self, label: str) -> Config:
         """The resolved, frozen config of the variant labelled `label`."""
-        return self._configs[label]
+        return self.variant(label).config
 
     def groups(self) -> list[tuple[tuple[Variant, ...], str | None]]:
         """The programs the study trains: (variants, swept name) each; a vmapped sweep group, or one variant alone
         when `vmap_sweeps` is off (see `sweep_groups`)."""
         return sweep_groups(self.variants) if self.vmap_sweeps else [((v,), None) for v in self.variants]
 
-    def to_json(self) -> str:
-        return json.dumps(dataclasses.asdict(self), indent=2)
-
     def resolved(self) -> dict[str, dict[str, Any]]:
-        """{label: every field of the variant's algorithm config, after per-env defaults, preset and overrides}."""
-        return {label: dataclasses.asdict(config) for label, config in self._configs.items()}
+        """{label: every field of the variant's config}."""
+        return {v.label: dataclasses.asdict(v.config) for v in self.variants}
 
     def sources(self) -> dict[str, dict[str, str]]:
         """{label: {field: where its resolved value came from}} (`offrl_jax.algos.SOURCES`)."""
-        return {label: dict(sources) for label, sources in self._sources.items()}
+        return {v.label: dict(v.sources) for v in self.variants}
+
+    def _json(self) -> dict:
+        fields = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        fields |= {"variants": [v.to_json() for v in self.variants],
+                   "online": dataclasses.asdict(self.online) if self.online else None}
+        return json.loads(json.dumps(fields, default=list)) | {"resolved": self.resolved(), "sources": self.sources()}
+
+    def to_json(self) -> str:
+        """The study: its fields, its variants (label, algorithm, preset), their configs (`resolved`) and `sources`."""
+        return json.dumps(self._json(), indent=2, default=list)
 
     def record_json(self, ds: Dataset | None = None, previous: str | None = None,
                     data_sha256: str | None = None) -> str:
-        """config.json: the study, its resolved configs, and the run records so far plus this one."""
+        """config.json: the study and the run records so far plus this one."""
         runs = run_records(json.loads(previous)) if previous else []
-        raw = dataclasses.asdict(self) | {"resolved": self.resolved(), "sources": self.sources(),
-                                          "runs": runs + [run_record(ds, self.dataset, data_sha256)]}
+        raw = self._json() | {"runs": runs + [run_record(ds, self.dataset, data_sha256)]}
         return json.dumps(raw, indent=2, default=list) + "\n"
 
     @staticmethod
@@ -204,16 +168,18 @@ class Study:
         raw = json.loads(text)
         run_records(raw)  # what the run wrote about itself (checked here); the study is the rest
         resolved = raw.pop("resolved", {})
+        sources = raw.pop("sources", {})
         raw.pop("runs", None)
-        raw.pop("sources", None)  # a record, as `resolved` is: the variants give it again
         if not isinstance(resolved, dict) or not all(isinstance(c, dict) for c in resolved.values()):
             raise ValueError("'resolved' must map each variant to its config (an object)")
+        if not isinstance(sources, dict) or not all(isinstance(c, dict) for c in sources.values()):
+            raise ValueError("'sources' must map each variant to its fields' sources (an object)")
         if "transitions" in raw:  # runs saved before the cap was renamed
             raw["max_transitions"] = raw.pop("transitions")
-        value = lambda x: tuple(x) if isinstance(x, list) else x  # noqa: E731  JSON has lists; configs use tuples
-        raw["variants"] = tuple(Variant(v["label"], v["algo"], tuple((k, value(x)) for k, x in v["overrides"]),
-                                        v.get("preset"), None if v.get("flags") is None else tuple(v["flags"]))
-                                for v in raw["variants"])
+        if not isinstance(raw.get("env"), str) or not isinstance(raw.get("dataset"), str):
+            raise ValueError("'env' and 'dataset' must be strings")
+        record = {"resolved": resolved, "sources": sources}
+        raw["variants"] = tuple(Variant.from_json(v, record, raw["env"], raw["dataset"]) for v in raw["variants"])
         raw["seeds"] = tuple(raw["seeds"])
         raw["final_window"] = tuple(raw["final_window"]) if raw.get("final_window") else None
         return Study(**raw)
@@ -260,7 +226,7 @@ def sweep_groups(variants: tuple[Variant, ...]) -> list[tuple[tuple[Variant, ...
 def _swept_name(a: Variant, b: Variant) -> str | None:
     if a.algo != b.algo or a.preset != b.preset:
         return None
-    da, db = dict(a.overrides), dict(b.overrides)
+    da, db = a.given(), b.given()
     diff = [k for k in sorted(da.keys() | db.keys()) if da.get(k) != db.get(k)]
     if len(diff) != 1 or diff[0] not in da or diff[0] not in db:
         return None

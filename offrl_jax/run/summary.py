@@ -159,7 +159,7 @@ def _summarize(study: Study, rows: list[dict], pretrain_ends: dict[str, int], be
             else float("nan"),
             # seeds whose final score is not finite (diverged and stopped): the aggregates leave them out
             "seeds_diverged": [seed for seed, f in zip(study.seeds, finals[v.label]) if not np.isfinite(f)],
-            "overrides": dict(v.overrides),
+            "overrides": v.given(),
             "config": dataclasses.asdict(config),
         })
     by_label = {s["variant"]: s for s in summary}
