@@ -102,3 +102,34 @@ def test_the_walk_of_alpha_in_docs_extending_is_the_files_that_name_it():
     assert "alpha" in names("algos/td3bc.py") and "alpha" in names("losses.py")
     carriers = ["app/studies.py", "run/study.py", "run/runner.py", "run/group.py", "app/flags.py", "algos/__init__.py"]
     assert not [f for f in carriers if "alpha" in names(f)]
+
+
+def test_reading_one_algorithm_is_the_files_docs_extending_counts():
+    """docs/extending.md's reading set: the files of the `--alpha` walk and the project modules each family file
+    imports; at most seven files and 2,000 lines for TD3+BC, as stated, and for every other family."""
+    import ast
+
+    text = (ROOT / "docs" / "extending.md").read_text()
+    said = re.search(r"is to read seven files, about ([\d,]+) lines", text)
+    assert said, "docs/extending.md no longer states the reading set; drop this test with it"
+    walk = ["app/flags.py", "algos/__init__.py", "losses.py"]
+
+    def reading_set(family: str) -> set[str]:
+        tree = ast.parse((ROOT / "offrl_jax" / "algos" / f"{family}.py").read_text())
+        imported = {node.module for node in ast.walk(tree) if isinstance(node, ast.ImportFrom) and node.module
+                    and node.module.startswith("offrl_jax")}
+        imported |= {f"{node.module}.{a.name}" for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)
+                     and node.module == "offrl_jax" for a in node.names}
+        files = {m.removeprefix("offrl_jax.").replace(".", "/") + ".py" for m in imported}
+        return {f for f in files if (ROOT / "offrl_jax" / f).is_file()} | set(walk) | {f"algos/{family}.py"}
+
+    def lines(files: set[str]) -> int:
+        return sum(len((ROOT / "offrl_jax" / f).read_text().splitlines()) for f in files)
+
+    td3bc = reading_set("td3bc")
+    assert td3bc == {*walk, "algos/td3bc.py", "algos/config.py", "algos/common.py", "nets.py"}, sorted(td3bc)
+    stated = int(said[1].replace(",", ""))
+    assert lines(td3bc) <= 2000 and abs(lines(td3bc) - stated) <= 0.1 * stated, lines(td3bc)
+    for family in FAMILY_FILES:
+        files = reading_set(family)
+        assert len(files) <= 8 and lines(files) <= 2300, (family, sorted(files), lines(files))
