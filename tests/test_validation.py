@@ -33,10 +33,11 @@ from offrl_jax.run.study import Study, Variant
     ("rebrac", {"noise_clip": -1.0}, "ReBRACConfig.noise_clip = -1.0 must be >= 0"),
     ("td3bc_cql", {"cql_temperature": 0.0}, "TD3BCConfig.cql_temperature = 0.0 must be positive"),
     ("td3bc_cql", {"cql_temperature": -1.0}, "TD3BCConfig.cql_temperature = -1.0 must be positive"),
-    ("cql", {"cql_temperature": 0.0}, "SACNConfig.cql_temperature = 0.0 must be positive"),
+    ("cql", {"cql_temperature": 0.0}, "CQLConfig.cql_temperature = 0.0 must be positive"),
     ("td3bc_cql", {"cql_weight": -5.0}, "TD3BCConfig.cql_weight = -5.0 must be >= 0"),
     ("edac_bc", {"bc_weight": -1.0}, "SACNConfig.bc_weight = -1.0 must be >= 0"),
-    ("cql", {"cql_alpha": -10.0}, "SACNConfig.cql_alpha = -10.0 must be >= 0"),
+    ("cql", {"cql_alpha": -10.0}, "CQLConfig.cql_alpha = -10.0 must be >= 0"),
+    ("calql", {"calibration_online": "always"}, "CQLConfig.calibration_online = 'always' must be episode or off"),
     ("bc", {"pretrain": "actor+critic"}, "pretrain = 'actor+critic' has no effect on the BC baseline"),
     ("bc", {"pretrain_auto": True}, "pretrain_auto = True has no effect on the BC baseline"),
     # types, checked against each field's annotation before its value
@@ -174,7 +175,8 @@ def test_load_policy_rejects_arguments(tmp_path, kw, message):
     assert message in str(err.value) and "\n" not in str(err.value)
 
 
-@pytest.mark.parametrize("algo", ["bc", "td3bc", "td3bc_cql", "edac", "sacn", "edac_bc", "cql", "rebrac", "iql"])
+@pytest.mark.parametrize("algo", ["bc", "td3bc", "td3bc_cql", "edac", "sacn", "edac_bc", "cql", "calql", "rebrac",
+                                  "iql"])
 @pytest.mark.parametrize("pretrain", ["none", "actor", "critic", "actor+critic"])
 def test_a_configs_planned_phases_are_its_algorithms_phases(algo, pretrain):
     """What a budget check and a dry run read (`Config.phases`, no networks) is what training runs: the same

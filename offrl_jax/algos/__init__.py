@@ -23,7 +23,7 @@ from offrl_jax.algos.common import Algo, Family, Phase
 from offrl_jax.algos.config import Config
 from offrl_jax.envs.registry import ENVS
 
-FAMILY_FILES = ("td3bc", "sacn", "rebrac", "iql")  # the families, each a file of this package, in --algo order
+FAMILY_FILES = ("td3bc", "sacn", "cql", "rebrac", "iql")  # the families, each a file of this package, in --algo order
 
 _modules = [importlib.import_module(f"{__name__}.{name}") for name in FAMILY_FILES]
 FAMILIES: dict[str, Family] = {name: module.FAMILY for name, module in zip(FAMILY_FILES, _modules)}
