@@ -22,6 +22,7 @@ critic pre-training as in offline RL (as TD3+BC+CQL's does).
 from __future__ import annotations
 
 import dataclasses
+from typing import Literal
 
 import jax
 import jax.numpy as jnp
@@ -30,9 +31,6 @@ from offrl_jax import losses as L
 from offrl_jax.algos.common import Algo, Batch, DataNeeds, Family, repeat_obs, uniform_actions
 from offrl_jax.algos.config import AUTHORS_CODE, check_cql_fields, require
 from offrl_jax.algos.sacn import SACN, SACNConfig, SACNState
-
-CALIBRATION_ONLINE = ("episode", "off")  # CQLConfig.calibration_online
-
 
 @dataclasses.dataclass(frozen=True)
 class CQLConfig(SACNConfig):
@@ -47,16 +45,12 @@ class CQLConfig(SACNConfig):
     # Cal-QL online: "episode" bounds an online row by its finished episode's return and draws only rows of
     # finished episodes (the authors' JaxCQL code); "off" turns calibration off for the whole online phase (CORL's
     # cal_ql.py, which stores no online returns)
-    calibration_online: str = "episode"
+    calibration_online: Literal["episode", "off"] = "episode"
 
     def __post_init__(self):
         super().__post_init__()
         check_cql_fields(self)
-        require(self, [
-            ("cql_alpha", self.cql_alpha >= 0, "must be >= 0 (0 = off)"),
-            ("calibration_online", self.calibration_online in CALIBRATION_ONLINE,
-             f"must be {' or '.join(CALIBRATION_ONLINE)}"),
-        ])
+        require(self, [("cql_alpha", self.cql_alpha >= 0, "must be >= 0 (0 = off)")])
 
     def needs(self) -> DataNeeds:
         """Cal-QL reads the Monte-Carlo returns; online, with `calibration_online` "episode", only rows of finished
