@@ -1,6 +1,6 @@
 """Figure 2: hopper, halfcheetah, walker2d medium; TD3+BC and EDAC, each with and without pre-training (and, beyond
-the paper, ReBRAC and IQL with `--algos rebrac iql`: TD3+BC's budget, ReBRAC at its published batch of 1024 unless
---batch-size sets another than the default 256).
+the paper, ReBRAC, IQL, CQL and Cal-QL with `--algos rebrac iql cql calql`: TD3+BC's budget, ReBRAC at its published
+batch of 1024 unless --batch-size sets another than the default 256).
 
 CPU-sized defaults (the paper runs 1M updates on a GPU), 3 seeds: TD3+BC 30k updates (10k pre-training),
 evaluation every 2.5k (~25 min per env on 2 cores); EDAC with 10 critics for 16k updates (12k pre-training: 3k soft
@@ -41,7 +41,7 @@ def build(args):
     for env in args.envs:
         for algo in args.algos:
             variants, extra = pretrain_variants(algo, args.pretrain, args), {}
-            if algo in ("td3bc", "rebrac", "iql"):  # --num-critics is EDAC's ensemble; these keep their two critics
+            if algo != "edac":  # --num-critics is EDAC's ensemble; the others keep their two critics
                 variants = tuple(replace(v, overrides=tuple((k, x) for k, x in v.overrides if k != "num_critics"))
                                  for v in variants)
             if algo == "edac" and authors:  # the authors' schedule: the preset's and per-env values, their budget
@@ -67,7 +67,8 @@ def make_parser():
         if action.dest == "batch_size":
             action.help = (f"transitions per gradient update, per seed, drawn uniformly with replacement (default "
                            f"{BATCH_SIZE}, which ReBRAC replaces with its own 1024)")
-    p.add_argument("--algos", nargs="+", choices=("td3bc", "edac", "rebrac", "iql"), default=["td3bc", "edac"],
+    p.add_argument("--algos", nargs="+", choices=("td3bc", "edac", "rebrac", "iql", "cql", "calql"),
+                   default=["td3bc", "edac"],
                    help="(default: td3bc edac, the paper's)")
     p.add_argument("--edac-updates", type=positive_int, default=None,
                    help=f"EDAC's budget (default {EDAC_UPDATES}; with --preset authors the authors' per env, "
