@@ -1,8 +1,8 @@
 """Float64 parity: our TD3+BC, EDAC, ReBRAC, IQL, CQL and Cal-QL updates equal a PyTorch reference update
 (`tests/torch_reference.py`, written the way CORL writes them, from Fujimoto & Gu 2021, An et al. 2021, Tarasov et
-al. 2023, Kostrikov et al. 2022, Kumar et al. 2020 and Nakamoto et al. 2023) to rounding.  ReBRAC and IQL are built from their own per-env defaults (their
-LayerNorm and epsilon as they ship), with the target-policy noise off; each test also checks that every network
-moved, so agreement is not two sides standing still.
+al. 2023, Kostrikov et al. 2022, Kumar et al. 2020 and Nakamoto et al. 2023) to rounding.  ReBRAC and IQL are
+built from their own per-env defaults (their LayerNorm and epsilon as they ship), with the target-policy noise off;
+each test also checks that every network moved, so agreement is not two sides standing still.
 
 Each test builds our algorithm with `make_config(..., preset="authors")` (torch's LayerNorm epsilon 1e-5, the authors'
 LayerNorm without affine parameters, lambda = alpha / mean|Q| with no epsilon, ...), copies its initial parameters
@@ -20,7 +20,8 @@ from that noise.  In float64 the same noise stays ~1e-12 for these few updates.
 The JAX side runs under `jax.enable_x64(True)` (a context manager: x64 does not leak into other tests in the same
 process).  EDAC's sampling noise is made identical by recording every `jax.random.normal` draw of
 `offrl_jax.nets` (through a proxy for that module's `jax` name, so nothing else is patched) while our update runs
-eagerly, and feeding the recorded draws to the torch actor in the same order (temperature, actor, TD target).
+eagerly, and feeding the recorded draws to the torch actor in the same order (temperature, actor, TD target).  CQL's
+and Cal-QL's uniform actions are recorded the same way, through `offrl_jax.algos.cql.uniform_actions`.
 
 Needs torch (`pip install -e .[torch]`); skipped without it.  Run: pytest -m parity -s (prints the max differences).
 """

@@ -32,6 +32,7 @@ from offrl_jax.algos.common import Algo, Batch, DataNeeds, Family, repeat_obs, u
 from offrl_jax.algos.config import AUTHORS_CODE, check_cql_fields, require
 from offrl_jax.algos.sacn import SACN, SACNConfig, SACNState
 
+
 @dataclasses.dataclass(frozen=True)
 class CQLConfig(SACNConfig):
     cql_alpha: float = 0.0  # CQL: critic loss = TD + cql_alpha * CQL penalty (0 = off)

@@ -43,8 +43,8 @@ from offrl_jax.algos.common import (
     split_budget,
 )
 from offrl_jax.algos.config import AUTHORS_CODE, Config, arch_with_bias, require
-from offrl_jax.losses import BALANCES
 from offrl_jax.data.returns import soft_returns_to_go, soft_returns_to_go_from_states
+from offrl_jax.losses import BALANCES
 from offrl_jax.nets import (
     FANS,
     TANH_LOG_DETS,
