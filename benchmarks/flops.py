@@ -101,7 +101,7 @@ def update_flops(config, phase: str, obs_dim: int, act_dim: int, batch: int = 25
     # soft family (EDAC / SAC-N / EDAC+BC / CQL)
     actor = mlp_dims(obs_dim, h, 2 * act_dim)
     q_grad: Grad = "second_order" if config.eta != 0 else "params"
-    m = config.cql_actions
+    m = getattr(config, "cql_actions", 0)  # the CQL family's (algos/cql.py)
 
     def critic_step(rl: bool):
         if rl or config.lam > 0:
@@ -109,7 +109,7 @@ def update_flops(config, phase: str, obs_dim: int, act_dim: int, batch: int = 25
             c.add(f"target critics fwd x{n}", eval_flops(critic, batch, copies=n))
         what = "fwd + action-grad + 2nd-order param grad (diversity)" if q_grad == "second_order" else "fwd+grad"
         c.add(f"critics {what} x{n}", eval_flops(critic, batch, q_grad, n))
-        if rl and config.cql_alpha > 0:
+        if rl and getattr(config, "cql_alpha", 0.0) > 0:
             c.add(f"CQL: actor fwd on 2 x B*{m}", eval_flops(actor, 2 * batch * m))
             c.add(f"CQL: critics fwd+grad x{n} on 3 x B*{m}", eval_flops(critic, 3 * batch * m, "params", n))
 

@@ -1,6 +1,6 @@
 """Figure 2: hopper, halfcheetah, walker2d medium; TD3+BC and EDAC, each with and without pre-training (and, beyond
-the paper, ReBRAC, IQL and AWAC with `--algos rebrac iql awac`: TD3+BC's budget, ReBRAC at its published batch of
-1024 unless --batch-size sets another than the default 256).
+the paper, ReBRAC, IQL, AWAC, CQL and Cal-QL with `--algos rebrac iql awac cql calql`: TD3+BC's budget, ReBRAC at its
+published batch of 1024 unless --batch-size sets another than the default 256).
 
 CPU-sized defaults (the paper runs 1M updates on a GPU), 3 seeds: TD3+BC 30k updates (10k pre-training),
 evaluation every 2.5k (~25 min per env on 2 cores); EDAC with 10 critics for 16k updates (12k pre-training: 3k soft
@@ -64,7 +64,8 @@ def make_parser():
         if action.dest == "batch_size":
             action.help = (f"transitions per gradient update, per seed, drawn uniformly with replacement (default "
                            f"{BATCH_SIZE}, which ReBRAC replaces with its own 1024)")
-    p.add_argument("--algos", nargs="+", choices=("td3bc", "edac", "rebrac", "iql", "awac"), default=["td3bc", "edac"],
+    p.add_argument("--algos", nargs="+", choices=("td3bc", "edac", "rebrac", "iql", "awac", "cql", "calql"),
+                   default=["td3bc", "edac"],
                    help="(default: td3bc edac, the paper's)")
     p.add_argument("--edac-updates", type=positive_int, default=None,
                    help=f"EDAC's budget (default {EDAC_UPDATES}; with --preset authors the authors' per env, "

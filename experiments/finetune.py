@@ -18,10 +18,12 @@ column for the online rows and the training episodes' mean score (train_score).
 How each family fine-tunes (its config fields, shown by --dry-run with their sources): minibatches half offline,
 half online (replay mix, online-mix 0.5: Cal-QL, CORL's ReBRAC), IQL's rows appended to the dataset (replay append:
 CORL's IQL); TD3+BC and ReBRAC explore with Gaussian noise on their action (explore-noise: TD3's 0.1, CORL's ReBRAC
-0), SAC-N/EDAC and IQL's Gaussian policy with a sample; ReBRAC drops its critic penalty and decays its actor
-penalty to half over the online phase (CORL); TD3+BC keeps its alpha (the behaviour term still tracks the data the
-minibatches mix in).  A run stopped inside its online phase resumes at its last online evaluation, envs and
-buffers restored exactly (checkpoints/<variant>.online.msgpack; docs/online.md).
+0), SAC-N/EDAC, CQL, Cal-QL and IQL's Gaussian policy with a sample; Cal-QL bounds the push-down by each finished
+online episode's return (--calibration-online episode, the authors' code) or drops the bound online (off, CORL's);
+ReBRAC drops its critic penalty and decays its actor penalty to half over the online phase (CORL); TD3+BC keeps its
+alpha (the behaviour term still tracks the data the minibatches mix in).  A run stopped inside its online phase
+resumes at its last online evaluation, envs and buffers restored exactly (checkpoints/<variant>.online.msgpack;
+docs/online.md).
 
     python -m experiments.finetune
     python -m experiments.finetune --env hopper --online-steps 2000 --online-block 500 --online-eval-every 1000 \\
@@ -89,7 +91,13 @@ def build(args) -> Study:
 
 def check_online_flags(study: Study, values: dict) -> Study:
     """`study`, unless an online flag given (`values`) does nothing for one of its variants: --online-mix where the
-    replay does not mix (online-only, append), --explore-noise where the actor explores with a sample."""
+    replay does not mix (online-only, append), --explore-noise where the actor explores with a sample,
+    --calibration-online where no variant calibrates (Cal-QL's online-rl arm has no bound: its form without the
+    penalty)."""
+    if "calibration_online" in values and not any(getattr(study.config(v.label), "calibration", False)
+                                                   for v in study.variants):
+        raise UsageError(f"--calibration-online: no variant of {study.name} bounds its CQL penalty by the returns "
+                         "(--algo calql does)")
     for v in study.variants:
         config = study.config(v.label)
         if "online_mix" in values and config.replay != "mix":

@@ -288,3 +288,12 @@ def cql_importance_penalty(
     )
     lse = temperature * jax.nn.logsumexp(cat / temperature, axis=-1)
     return jnp.sum(jnp.mean(lse - q_data, axis=-1))
+
+
+def calibrated_q(q_policy: jax.Array, lower_bound: jax.Array) -> jax.Array:
+    """Cal-QL's calibration: max(Q(s, a~pi), V_MC(s)), the policy-action values under CQL's push-down bounded below
+    by the Monte-Carlo return-to-go of the row's state (the data's, or a finished online episode's).  Where the
+    bound is above Q the push-down no longer lowers Q there (its gradient is 0).  q_policy (N, B, M),
+    lower_bound (B,) -> (N, B, M)."""
+    assert_shapes(q_policy=(q_policy, "NBM"), lower_bound=(lower_bound, "B"))
+    return jnp.maximum(q_policy, lower_bound[None, :, None])

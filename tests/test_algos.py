@@ -1,4 +1,6 @@
 """Loss conventions of the algorithms against the authors' code, on tiny networks."""
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -42,7 +44,7 @@ def test_cql_baseline_follows_the_authors_configs():
         cfg = make_config("cql", env)
         assert (cfg.cql_alpha, cfg.actor_lr, cfg.critic_lr, cfg.backup_entropy) == (10.0, 3e-5, 3e-4, False)
         assert cfg.num_critics == 2 and cfg.pretrain == "none" and cfg.simultaneous_update
-    assert not make_config("edac", "hopper").simultaneous_update
+    assert "simultaneous_update" not in {f.name for f in dataclasses.fields(make_config("edac", "hopper"))}
 
 
 def test_edac_target_mode_is_continuous_at_lambda_zero():
@@ -99,3 +101,57 @@ def test_edac_logs_the_hand_over_diagnostics():
                                      jnp.broadcast_to(batch["actions"], (3, *batch["actions"].shape)))
     np.testing.assert_allclose(float(metrics["q_std"]), float(jnp.mean(jnp.std(q, axis=0))), rtol=1e-5)
     assert float(metrics["q_std"]) > 0 and float(metrics["bc_mse"]) > 0
+
+
+def _calql_losses(returns: float, online: bool, **overrides):
+    """The critic loss and metrics of CQL and Cal-QL on one minibatch (every return set to `returns`), same key."""
+    batch = tiny_batch() | {"returns": jnp.full((5,), returns)}
+    if online:
+        batch["online"] = jnp.array([0.0, 1.0, 0.0, 1.0, 0.0])
+    out = {}
+    for algo in ("cql", "calql"):
+        cfg = make_config(algo, "hopper", hidden=(8, 8), cql_actions=3, **overrides)
+        model = make_algorithm(cfg, 3, 2, 7)
+        state = model.init(jax.random.PRNGKey(1))
+        out[algo] = model.critic_loss(state.critic.params, state, batch, jax.random.PRNGKey(4), False)
+    return out
+
+
+def test_calql_bounds_the_policy_values_by_the_returns_and_cql_does_not():
+    """Returns far below every Q: the bound never binds and Cal-QL's loss is CQL's; far above: it binds everywhere,
+    the push-down's policy terms are the returns and the loss differs."""
+    low = _calql_losses(-1e4, online=False)
+    assert float(low["calql"][0]) == float(low["cql"][0]) and float(low["calql"][1]["calibration_rate"]) == 0.0
+    high = _calql_losses(1e2, online=False)
+    assert float(high["calql"][1]["calibration_rate"]) == 1.0 and "calibration_rate" not in high["cql"][1]
+    assert float(high["calql"][1]["cql_penalty"]) > float(high["cql"][1]["cql_penalty"]) + 50
+
+
+def test_calql_online_calibration_modes():
+    """Online (a minibatch with the `online` field): "episode" (the authors' code) keeps the bound, "off" (CORL's)
+    turns it off for every row; only "episode" draws rows of finished episodes alone."""
+    episode = _calql_losses(1e2, online=True)
+    assert float(episode["calql"][0]) != float(episode["cql"][0])
+    off = _calql_losses(1e2, online=True, calibration_online="off")
+    assert float(off["calql"][0]) == float(off["cql"][0])
+    assert float(off["calql"][1]["calibration_rate"]) == 1.0  # still logged: how often it would have bound
+    assert make_config("calql", "hopper").needs().returns
+    assert not make_config("calql", "hopper", calibration_online="off").needs().returns
+    assert not make_config("cql", "hopper").needs().returns
+
+
+def test_cql_critic_pretrains_on_the_returns_its_backup_estimates():
+    """Without entropy in the backup (CQL, Cal-QL) the critic pre-trains on the data's Monte-Carlo returns and no
+    soft returns are computed; with it, on SAC-N's soft returns."""
+    batch = tiny_batch() | {"returns": jnp.arange(5.0)}
+    cfg = make_config("calql", "hopper", hidden=(8, 8), cql_actions=3, pretrain="actor+critic", lam=0.0,
+                      cql_alpha=0.0)
+    algo = make_algorithm(cfg, 3, 2, 7)
+    state = algo.init(jax.random.PRNGKey(1))
+    assert algo.start_hooks() == {}
+    loss, _ = algo.critic_loss(state.critic.params, state, batch, jax.random.PRNGKey(2), True)
+    q = algo.critic.apply(state.critic.params, batch["observations"], batch["actions"])
+    np.testing.assert_allclose(loss, jnp.mean((q - batch["returns"][None]) ** 2), rtol=1e-6)
+    soft = make_algorithm(dataclasses.replace(cfg, backup_entropy=True), 3, 2, 7)
+    assert set(soft.start_hooks()) == {"critic_pretrain"}
+    np.testing.assert_allclose(soft.pretrain_returns(state, batch), state.soft_returns[batch["idx"]])

@@ -112,9 +112,9 @@ def test_string_config_flags_offer_what_the_config_accepts():
 
 def test_a_family_reusing_a_field_name_with_another_type_is_refused():
     """All families share one flag per field name: a new family's `alpha: int` would be parsed as TD3+BC's float."""
+    from offrl_jax.algos.config import Config
     from offrl_jax.algos.sacn import SACNConfig
     from offrl_jax.algos.td3bc import TD3BCConfig
-    from offrl_jax.algos.config import Config
 
     @dataclasses.dataclass(frozen=True)
     class ClashConfig(Config):

@@ -173,6 +173,16 @@ def test_cql_importance_penalty():
     A(grad, [[0.0]])
 
 
+def test_calibrated_q_bounds_policy_values_by_the_state_return():
+    # critic 0 / 1, state 0 (bound 1) / state 1 (bound -5), two policy actions each
+    q = jnp.array([[[0.0, 2.0], [-6.0, -4.0]], [[1.5, -1.0], [3.0, -5.5]]])
+    bound = jnp.array([1.0, -5.0])
+    A(L.calibrated_q(q, bound), [[[1.0, 2.0], [-5.0, -4.0]], [[1.5, 1.0], [3.0, -5.0]]])
+    # the push-down's gradient reaches Q only where Q is above its bound
+    grad = jax.grad(lambda q: jnp.sum(L.calibrated_q(q, bound)))(q)
+    A(grad, [[[0.0, 1.0], [0.0, 1.0]], [[1.0, 0.0], [1.0, 0.0]]])
+
+
 def test_edac_diversity_is_a_batch_mean():
     # state 0: aligned (2 / (N - 1) = 2), state 1: orthogonal (0) -> 1 (a batch sum would give 2)
     A(L.edac_diversity_loss(jnp.array([[[1.0, 0.0], [1.0, 0.0]], [[3.0, 0.0], [0.0, 2.0]]])), 1.0, rtol=1e-6)
@@ -283,6 +293,7 @@ Z = jnp.zeros
     ("q_data", lambda: L.cql_uniform_penalty(Z((2, 5, 10)), Z((2, 5, 1)))),
     ("log_prob_next_policy", lambda: L.cql_importance_penalty(Z((2, 5, 10)), Z((2, 5, 10)), Z((5, 10)),
                                                               Z((2, 5, 10)), Z((5, 1)), Z((2, 5)), 3)),
+    ("lower_bound", lambda: L.calibrated_q(Z((2, 5, 10)), Z((5, 1)))),
 ], ids=lambda a: a if isinstance(a, str) else "")
 def test_a_wrong_shape_fails_when_traced_naming_the_argument(argument, call):
     named = rf"\[{argument}: \("  # chex's message ends with the argument's documented shape, e.g. [returns: (B,)]

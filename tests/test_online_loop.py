@@ -229,6 +229,8 @@ def test_a_run_killed_inside_the_online_phase_goes_on_from_its_last_checkpoint_e
     (["--algo", "iql", "--online-mix", "0.2"], "replay append, which does not mix"),  # IQL's own replay
     (["--algo", "edac", "--explore-noise", "0.3"], "actor is stochastic"),
     (["--algo", "iql", "--no-deterministic", "--explore-noise", "0.3"], "actor is stochastic"),
+    (["--algo", "cql", "--calibration-online", "off"], "no variant of hopper-medium-cql bounds its CQL penalty"),
+    (["--algo", "calql", "--arms", "online-rl", "--calibration-online", "off"], "bounds its CQL penalty"),
     (["--variant", "pretrained"], "--variant chooses among the variants of a finished run given with --from"),
     (["--from", "somewhere", "--variant", "pretrained", "pretrained"], "a variant is named twice"),
     # what the int32 update counter cannot count: the online updates, and with the offline ones
@@ -251,6 +253,7 @@ def test_an_actor_samples_or_takes_the_exploration_noise():
     assert not samples(config("td3bc"), "hopper") and not samples(config("rebrac"), "hopper")
     assert not samples(config("iql", deterministic=True), "hopper")  # noise: its action is deterministic
     assert samples(config("edac"), "hopper") and samples(config("iql", deterministic=False), "hopper")
+    assert samples(config("cql"), "hopper") and samples(config("calql"), "hopper")
 
 
 def test_fewer_online_steps_than_the_default_block_shrink_it_to_fit():

@@ -1,8 +1,8 @@
-"""Float64 parity: our TD3+BC, EDAC, ReBRAC, IQL and AWAC updates equal a PyTorch reference update
+"""Float64 parity: our TD3+BC, EDAC, ReBRAC, IQL, AWAC, CQL and Cal-QL updates equal a PyTorch reference update
 (`tests/torch_reference.py`, written the way CORL writes them, from Fujimoto & Gu 2021, An et al. 2021, Tarasov et
-al. 2023, Kostrikov et al. 2022 and Nair et al. 2020) to rounding.  ReBRAC, IQL and AWAC are built from their own
-per-env defaults (their LayerNorm and epsilon as they ship), with ReBRAC's target-policy noise off; each test also
-checks that every network moved, so agreement is not two sides standing still.
+al. 2023, Kostrikov et al. 2022, Nair et al. 2020, Kumar et al. 2020 and Nakamoto et al. 2023) to rounding.  ReBRAC,
+IQL and AWAC are built from their own per-env defaults (their LayerNorm and epsilon as they ship), with the
+target-policy noise off; each test also checks that every network moved, so agreement is not two sides standing still.
 
 Each test builds our algorithm with `make_config(..., preset="authors")` (torch's LayerNorm epsilon 1e-5, the authors'
 LayerNorm without affine parameters, lambda = alpha / mean|Q| with no epsilon, ...), copies its initial parameters
@@ -20,7 +20,8 @@ from that noise.  In float64 the same noise stays ~1e-12 for these few updates.
 The JAX side runs under `jax.enable_x64(True)` (a context manager: x64 does not leak into other tests in the same
 process).  EDAC's sampling noise is made identical by recording every `jax.random.normal` draw of
 `offrl_jax.nets` (through a proxy for that module's `jax` name, so nothing else is patched) while our update runs
-eagerly, and feeding the recorded draws to the torch actor in the same order (temperature, actor, TD target).
+eagerly, and feeding the recorded draws to the torch actor in the same order (temperature, actor, TD target).  CQL's
+and Cal-QL's uniform actions are recorded the same way, through `offrl_jax.algos.cql.uniform_actions`.
 
 Needs torch (`pip install -e .[torch]`); skipped without it.  Run: pytest -m parity -s (prints the max differences).
 """
@@ -270,10 +271,10 @@ class _NoiseRecorder:
         self.draws.append(np.asarray(draw))  # fails on a tracer: run the update eagerly, not under jit
         return draw
 
-    def take(self, count: int) -> list[torch.Tensor]:
+    def take(self, count: int, shape: tuple[int, ...] = (B, ACT)) -> list[torch.Tensor]:
         assert len(self.draws) >= count, f"expected {count} more noise draws, {len(self.draws)} recorded"
         out, self.draws = self.draws[:count], self.draws[count:]
-        assert all(d.shape == (B, ACT) for d in out), [d.shape for d in out]
+        assert all(d.shape == shape for d in out), [d.shape for d in out]
         return [torch.tensor(d) for d in out]
 
     def __getattr__(self, name):  # everything but `random`
@@ -529,3 +530,62 @@ def test_awac_rl_update_matches_torch(awac_lambda, monkeypatch):
         assert not recorder.draws
         compare(f"awac rl (lambda {cfg.awac_lambda})", awac_pairs(state, agent))
         assert_moved(before, awac_pairs(state, agent), ("actor", "critic", "target.critic"))
+
+
+# ---------------------------------------------------------------------------------------------------- CQL, Cal-QL
+
+CQL_ACTIONS = 4
+
+
+def calql_pairs(state, agent: ref.CalQL):
+    pairs = mlp_pairs("actor", state.actor.params["params"]["MLP_0"], torch_layers(agent.actor, nn.Linear), [])
+    pairs += critic_pairs("critic", state.critic.params, agent.critics)
+    pairs += critic_pairs("target.critic", state.critic.target, agent.critics_target)
+    return pairs + [("log_alpha", np.asarray(state.log_alpha.params), agent.log_alpha)]
+
+
+@pytest.mark.parametrize("algo", ["calql", "cql"])
+def test_calql_rl_update_matches_torch(algo, monkeypatch):
+    """10 simultaneous updates of CORL's Cal-QL (and, without the bound, its CQL): temperature, actor and critic
+    losses from the incoming state, the importance-sampled penalty over random actions and policy actions at s and
+    s', the policy terms bounded by the rows' returns for Cal-QL; Polyak.  The returns are drawn around the initial
+    Q-values, so that the bound binds for some rows and not for others."""
+    recorder, uniforms = _NoiseRecorder(), []
+    monkeypatch.setattr(nets, "jax", recorder)
+    from offrl_jax.algos import cql
+
+    def recorded_uniform(*args):
+        draw = cql_uniform(*args)
+        uniforms.append(torch.tensor(np.asarray(draw)))
+        return draw
+
+    cql_uniform = cql.uniform_actions
+    monkeypatch.setattr(cql, "uniform_actions", recorded_uniform)
+    data = dataset()
+    data["returns"] = 0.3 * np.random.default_rng(5).normal(size=ROWS)
+    with float64():
+        cfg = make_config(algo, preset="authors", hidden=(32, 32), actor_hidden=(32, 32, 32), actor_layer_norm=False,
+                          critic_layer_norm=False, cql_actions=CQL_ACTIONS)
+        assert (cfg.simultaneous_update, cfg.backup_entropy, cfg.calibration, cfg.timeouts, cfg.tanh_log_det) == (
+            True, False, algo == "calql", "bootstrap", "exact")
+        assert cfg.alpha_lr == cfg.actor_lr and cfg.log_std_bounds == (-20.0, 2.0) and cfg.log_alpha_bound == 0
+        model = make_algorithm(cfg, OBS, ACT, ROWS)
+        state = to64(model.init(jax.random.key(0)))
+        agent = ref.CalQL(OBS, ACT, cfg.hidden, cfg.actor_hidden, cfg.actor_lr, cfg.critic_lr, cfg.gamma, cfg.tau,
+                          cfg.cql_alpha, cfg.cql_temperature, cfg.log_std_offset, calibrate=cfg.calibration)
+        copy_in(calql_pairs(state, agent))
+        before = calql_pairs(state, agent)
+        phase = model.phases(50_000)[-1]
+        assert phase.name == "offline_rl" and phase.updates_per_call == 1
+        rates = []
+        for i, b in enumerate(minibatches(data, 10)):
+            state, metrics = phase.update(state, stack([b]), jax.random.key(i))  # eagerly: the noise is recorded
+            rates.append(float(metrics.get("calibration_rate", 0.5)))
+            noise = recorder.take(3) + recorder.take(2, (B, CQL_ACTIONS, ACT))
+            (random_actions,) = uniforms
+            uniforms.clear()
+            agent.update(torch_batch(b, cfg.timeouts), torch.tensor(b["returns"]), noise, random_actions)
+        assert not recorder.draws
+        assert 0.1 < np.mean(rates) < 0.9, rates  # the bound binds for some policy actions, not for all
+        compare(f"{algo} rl", calql_pairs(state, agent))
+        assert_moved(before, calql_pairs(state, agent), ("actor", "critic", "target.critic", "log_alpha"))

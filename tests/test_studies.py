@@ -132,6 +132,8 @@ def test_figure2_num_critics_is_edac_only():
     studies = {s.name: s for s in build(figure2, ["--envs", "hopper", "--num-critics", "4"])}
     assert all("num_critics" not in v.given() for v in studies["figure2-hopper-td3bc"].variants)
     assert all(v.given()["num_critics"] == 4 for v in studies["figure2-hopper-edac"].variants)
+    cql = {s.name: s for s in build(figure2, ["--envs", "hopper", "--algos", "calql", "--num-critics", "4"])}
+    assert all("num_critics" not in v.given() for v in cql["figure2-hopper-calql"].variants)
 
 
 def test_alpha_sweep_builds_one_variant_per_value_and_groups_them():

@@ -33,10 +33,11 @@ from offrl_jax.run.study import Study, Variant
     ("rebrac", {"noise_clip": -1.0}, "ReBRACConfig.noise_clip = -1.0 must be >= 0"),
     ("td3bc_cql", {"cql_temperature": 0.0}, "TD3BCConfig.cql_temperature = 0.0 must be positive"),
     ("td3bc_cql", {"cql_temperature": -1.0}, "TD3BCConfig.cql_temperature = -1.0 must be positive"),
-    ("cql", {"cql_temperature": 0.0}, "SACNConfig.cql_temperature = 0.0 must be positive"),
+    ("cql", {"cql_temperature": 0.0}, "CQLConfig.cql_temperature = 0.0 must be positive"),
     ("td3bc_cql", {"cql_weight": -5.0}, "TD3BCConfig.cql_weight = -5.0 must be >= 0"),
     ("edac_bc", {"bc_weight": -1.0}, "SACNConfig.bc_weight = -1.0 must be >= 0"),
-    ("cql", {"cql_alpha": -10.0}, "SACNConfig.cql_alpha = -10.0 must be >= 0"),
+    ("cql", {"cql_alpha": -10.0}, "CQLConfig.cql_alpha = -10.0 must be >= 0"),
+    ("calql", {"calibration_online": "always"}, "CQLConfig.calibration_online = 'always' must be 'episode' or 'off'"),
     ("bc", {"pretrain": "actor+critic"}, "pretrain = 'actor+critic' has no effect on the BC baseline"),
     ("bc", {"pretrain_auto": True}, "pretrain_auto = True has no effect on the BC baseline"),
     # types, checked against each field's annotation before its value

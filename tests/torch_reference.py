@@ -494,4 +494,91 @@ class AWAC:
         self.actor_opt.zero_grad()
         actor_loss.backward()
         self.actor_opt.step()
+
+
+# ------------------------------------------------------------------------------------------------------ CQL, Cal-QL
+
+
+class CalQL:
+    """CORL's Cal-QL update (cal_ql.py; Nakamoto et al. 2023), which with `calibrate=False` is its CQL (cql.py).
+
+    Twin critics (MLPs, no LayerNorm), a tanh-Gaussian actor whose last layer gives the mean and the raw log-std
+    (log-std = raw + `log_std_offset`, clipped to [-20, 2]; CORL's multiplier and offset are trainable scalars, held
+    constant here as ours are), a learned temperature (Adam at the policy learning rate), no entropy in the backup.
+    `update(batch, returns, noise, random_actions)` computes the temperature, actor and critic losses from the incoming
+    parameters, then steps all three and moves the target critics.  The critic loss is the two TD errors plus
+    cql_alpha * (T logsumexp over [Q(s, a_rand) - A log 0.5, Q(s, a~pi(s)) - log pi, Q(s, a~pi(s')) - log pi'] / T
+    - Q(s, a_data)), batch-mean, per critic; with `calibrate` the two policy-action Q sets are first replaced by
+    max(Q, G(s)), G the row's Monte-Carlo return.  `noise`: the standard-normal draws of the temperature's, the
+    actor's and the TD target's samples (B, A) each, and the penalty's at s and at s' (B, M, A) each (CORL's
+    temperature and actor losses share one sample; here each has its own, as ours); `random_actions` (B, M, A)."""
+
+    def __init__(self, obs_dim: int, act_dim: int, hidden: tuple[int, ...], actor_hidden: tuple[int, ...],
+                 actor_lr: float, critic_lr: float, gamma: float, tau: float, cql_alpha: float, temperature: float,
+                 log_std_offset: float, calibrate: bool):
+        self.actor = mlp(obs_dim, actor_hidden, 2 * act_dim, layer_norm=False)
+        self.critics = nn.ModuleList([mlp(obs_dim + act_dim, hidden, 1, layer_norm=False) for _ in range(2)])
+        self.critics_target = copy.deepcopy(self.critics)
+        self.log_alpha = torch.tensor(0.0, requires_grad=True)
+        self.actor_opt = torch.optim.Adam(self.actor.parameters(), lr=actor_lr)
+        self.critic_opt = [torch.optim.Adam(c.parameters(), lr=critic_lr) for c in self.critics]
+        self.alpha_opt = torch.optim.Adam([self.log_alpha], lr=actor_lr)
+        self.act_dim, self.gamma, self.tau, self.cql_alpha = act_dim, gamma, tau, cql_alpha
+        self.temperature, self.log_std_offset, self.calibrate = temperature, log_std_offset, calibrate
+        self.target_entropy = -float(act_dim)
+
+    def sample(self, state, noise):
+        """(tanh(u), log pi) for u = mean + std * noise, state (..., obs) -> ((..., A), (...,))."""
+        mean, raw = torch.split(self.actor(state), self.act_dim, dim=-1)
+        std = torch.exp(torch.clamp(raw + self.log_std_offset, -20.0, 2.0))
+        u = mean + std * noise
+        log_det = 2.0 * (math.log(2.0) - u - F.softplus(-2.0 * u))  # torch's TanhTransform
+        return torch.tanh(u), (torch.distributions.Normal(mean, std).log_prob(u) - log_det).sum(-1)
+
+    def q(self, critics, state, action):
+        return [c(torch.cat([state, action], -1))[..., 0] for c in critics]
+
+    def update(self, batch, returns, noise, random_actions) -> None:
+        state, action, reward, next_state, done = batch
+        noise_alpha, noise_actor, noise_target, noise_pi, noise_next = noise
+        m = random_actions.shape[1]
+        _, log_pi = self.sample(state, noise_alpha)
+        alpha_loss = -(self.log_alpha * (log_pi + self.target_entropy).detach()).mean()
+        alpha = self.log_alpha.exp().detach()
+        pi, log_pi = self.sample(state, noise_actor)
+        q1_pi, q2_pi = self.q(self.critics, state, pi)
+        actor_loss = (alpha * log_pi - torch.min(q1_pi, q2_pi)).mean()
+
+        with torch.no_grad():
+            next_action, _ = self.sample(next_state, noise_target)
+            target = reward[:, 0] + (1 - done[:, 0]) * self.gamma * torch.min(
+                *self.q(self.critics_target, next_state, next_action))
+            repeat = lambda x: x.unsqueeze(1).repeat_interleave(m, dim=1)  # noqa: E731  (B, D) -> (B, M, D)
+            a_pi, logp_pi = self.sample(repeat(state), noise_pi)
+            a_next, logp_next = self.sample(repeat(next_state), noise_next)
+        critic_loss = 0.0
+        q_data = self.q(self.critics, state, action)
+        q_rand = self.q(self.critics, repeat(state), random_actions)
+        q_cur = self.q(self.critics, repeat(state), a_pi)
+        q_nxt = self.q(self.critics, repeat(state), a_next)
+        bound = returns.view(-1, 1).repeat(1, m)
+        for i in range(2):
+            cur, nxt = q_cur[i], q_nxt[i]
+            if self.calibrate:
+                cur, nxt = torch.maximum(cur, bound), torch.maximum(nxt, bound)
+            cat = torch.cat([q_rand[i] - math.log(0.5 ** self.act_dim), nxt - logp_next, cur - logp_pi], dim=1)
+            ood = torch.logsumexp(cat / self.temperature, dim=1) * self.temperature
+            critic_loss = critic_loss + F.mse_loss(q_data[i], target) + self.cql_alpha * (ood - q_data[i]).mean()
+
+        self.alpha_opt.zero_grad()
+        alpha_loss.backward()
+        self.alpha_opt.step()
+        self.actor_opt.zero_grad()
+        actor_loss.backward()
+        self.actor_opt.step()
+        for opt in self.critic_opt:
+            opt.zero_grad()
+        critic_loss.backward()
+        for opt in self.critic_opt:
+            opt.step()
         polyak(self.critics, self.critics_target, self.tau)

@@ -23,7 +23,8 @@ from offrl_jax.algos.common import Algo, Family, Phase
 from offrl_jax.algos.config import Config
 from offrl_jax.envs.registry import ENVS
 
-FAMILY_FILES = ("td3bc", "sacn", "rebrac", "iql", "awac")  # the families, each a file of this package, in --algo order
+# the families, each a file of this package, in --algo order
+FAMILY_FILES = ("td3bc", "sacn", "cql", "rebrac", "iql", "awac")
 
 FAMILIES: dict[str, Family] = {}
 ALGOS: dict[str, Algo] = {}

@@ -28,7 +28,8 @@ TIMEOUTS = ("bootstrap", "stop", "drop")
 REPLAY_MODES = ("mix", "append", "online-only")  # `offrl_jax.online.sampling`
 # the fields only an online phase reads: flags of the fine-tuning study alone (a study that never goes online would
 # ignore them); a family adds its own online fields to this set
-ONLINE_FIELDS = frozenset({"replay", "online_mix", "explore_noise", "online_critic_beta", "online_actor_beta_floor"})
+ONLINE_FIELDS = frozenset({"replay", "online_mix", "explore_noise", "online_critic_beta", "online_actor_beta_floor",
+                           "calibration_online"})
 PretrainMode = Literal["none", "actor", "critic", "actor+critic"]
 # The values of the `authors` preset every family shares: the authors' code (AdamJelley/EfficientOfflineRL, a CORL
 # fork) switch by switch; each family's file adds its own, and docs/fidelity.md has the table (what the paper says,

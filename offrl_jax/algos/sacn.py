@@ -5,15 +5,15 @@ algorithms (`ALGOS`):
     sacn     SAC-N: SAC with the min over N critics (eta = 0)
     edac_bc  EDAC+BC: EDAC with the actor loss balanced against MSE(sampled action, dataset action) (the paper's
              hybrid, Appendix G)
-    cql      CQL (CORL's form): SAC with N = 2 + alpha_cql * CORL's importance-sampled CQL penalty (no entropy in the
-             backup)
+
+CQL and Cal-QL extend this family in their own file (`algos/cql.py`).
 
 Pre-training (Alg. 2): soft BC with the temperature tuned (`actor`), then soft returns-to-go computed once with that
 actor and alpha, then critic regression on them with the diversity loss as regulariser (`critic`), then offline RL
 with alpha carried over.  `actor+critic` runs both phases in that order (the paper's procedure for soft algorithms).
 
-Over 300 lines for a stated reason: the file is the family's whole algorithm, its four named algorithms with their
-per-env values and presets included, so that reading it is reading EDAC, SAC-N, EDAC+BC and CQL.
+Over 300 lines for a stated reason: the file is the family's whole algorithm, its three named algorithms with their
+per-env values and presets included, so that reading it is reading EDAC, SAC-N and EDAC+BC.
 """
 from __future__ import annotations
 
@@ -39,13 +39,12 @@ from offrl_jax.algos.common import (
     gradient_step,
     new_model,
     polyak,
-    repeat_obs,
     single,
     split_budget,
-    uniform_actions,
 )
-from offrl_jax.algos.config import AUTHORS_CODE, Config, arch_with_bias, check_cql_fields, require
+from offrl_jax.algos.config import AUTHORS_CODE, Config, arch_with_bias, require
 from offrl_jax.data.returns import soft_returns_to_go, soft_returns_to_go_from_states
+from offrl_jax.losses import BALANCES
 from offrl_jax.nets import (
     FANS,
     TANH_LOG_DETS,
@@ -77,9 +76,6 @@ class SACNConfig(Config):
     init_alpha: float = 1.0  # initial entropy temperature
     backup_entropy: bool = True  # subtract alpha log pi(a'|s') in the TD target
     bc_weight: float = 0.0  # EDAC+BC: actor loss = SAC/sg|SAC| + bc_weight * MSE/sg|MSE| (0 = off)
-    cql_alpha: float = 0.0  # CQL: critic loss = TD + cql_alpha * CQL penalty (0 = off)
-    cql_actions: int = 10  # CQL: uniform actions sampled per state
-    cql_temperature: float = 1.0  # CQL: logsumexp temperature
     actor_pretrain_fraction: float = 0.5  # share of pretrain_updates spent on soft BC (the rest: critic regression)
     # updates added to the last pre-training phase after pretrain_updates, taken from offline RL while it has them;
     # the authors' loop pre-trains while epoch <= pretrain_epochs, one 1k-update epoch more than it names: 1000
@@ -89,15 +85,11 @@ class SACNConfig(Config):
     # last row gets none and a time-out's tail repeats H(s_T))
     soft_entropy_at: str = "next_observations"
     entropy_batch: int = 16_384  # rows per batch when computing the per-state entropies for the soft returns
-    # CQL (CORL's cql.py): temperature, actor and critic losses all from the state before the update; False = EDAC
-    # (CORL's edac.py): temperature, then actor, then critic, each seeing the step before
-    simultaneous_update: bool = False
 
     SWEEPABLE: ClassVar[tuple[str, ...]] = ("eta", "tau")  # vmappable in one program (see common.with_hparams)
 
     def __post_init__(self):
         super().__post_init__()
-        check_cql_fields(self)
         if self.alpha_lr <= 0 or self.init_alpha <= 0:
             raise ValueError("SACNConfig.alpha_lr and init_alpha must be positive")
         require(self, [
@@ -112,7 +104,7 @@ class SACNConfig(Config):
             ("critic_fan", self.critic_fan in FANS, f"must be {' or '.join(FANS)}"),
             ("soft_entropy_at", self.soft_entropy_at in SOFT_ENTROPY_AT, f"must be {' or '.join(SOFT_ENTROPY_AT)}"),
             ("bc_weight", self.bc_weight >= 0, "must be >= 0 (0 = off)"),
-            ("cql_alpha", self.cql_alpha >= 0, "must be >= 0 (0 = off)"),
+            ("balance", self.balance in BALANCES, f"must be one of {', '.join(BALANCES)}"),
         ])
 
     def arch(self) -> Arch:
@@ -227,25 +219,24 @@ class SACN(Algorithm):
         (grads,) = vjp(jnp.ones_like(q))
         return q, L.edac_diversity_loss(grads)
 
-    def cql_penalty(self, params, state: SACNState, batch: Batch, q_data: jax.Array, key: jax.Array):
-        m, obs, next_obs = self.cfg.cql_actions, batch["observations"], batch["next_observations"]
-        k_rand, k_pi, k_next = jax.random.split(key, 3)
-        obs_m = repeat_obs(obs, m)
-        a_pi, logp_pi = self.sample_policy(state.actor.params, obs_m, k_pi)
-        a_next, logp_next = self.sample_policy(state.actor.params, repeat_obs(next_obs, m), k_next)
-        q_rand = self.critic.apply(params, obs_m, uniform_actions(k_rand, obs.shape[0], m, self.act_dim))
-        q_pi, q_next = self.critic.apply(params, obs_m, a_pi), self.critic.apply(params, obs_m, a_next)
-        return L.cql_importance_penalty(q_rand, q_pi, logp_pi, q_next, logp_next, q_data, self.act_dim,
-                                        self.cfg.cql_temperature)
-
     # ---------------------------------------------------------------------------------------------- losses
+    def pretrain_returns(self, state: SACNState, batch: Batch) -> jax.Array:
+        """(B,) the critic's pre-training target: the soft returns-to-go of the soft-BC policy (Alg. 2)."""
+        return state.soft_returns[batch["idx"]]
+
     def critic_loss(self, params, state: SACNState, batch: Batch, key: jax.Array, pretraining: bool):
+        loss, metrics, _ = self.critic_terms(params, state, batch, key, pretraining)
+        return loss, metrics
+
+    def critic_terms(self, params, state: SACNState, batch: Batch, key: jax.Array, pretraining: bool):
+        """(loss, metrics, Q (N, B) at the data's actions): the TD (or pre-training) loss + eta * diversity, with
+        the second half of `key` left for a penalty a subclass adds (CQL's)."""
         cfg = self.cfg
-        k_target, k_cql = jax.random.split(key)
+        k_target, _ = jax.random.split(key)
         q, diversity = self.q_and_diversity(params, batch)
         td_fn = lambda: self.td_target(state, batch, k_target, clip=not pretraining)  # noqa: E731
         if pretraining:  # the authors' EDAC pre-training averages over critics; its TD loss (below) sums over them
-            mc = state.soft_returns[batch["idx"]]
+            mc = self.pretrain_returns(state, batch)
             loss = L.pretrain_critic_loss(q, mc, td_fn, cfg.lam, cfg.lambda_mode, per_critic="mean", form=cfg.balance)
             metrics = {"mc_error": jnp.mean((q - mc[None]) ** 2)}
         else:
@@ -253,11 +244,7 @@ class SACN(Algorithm):
             metrics = {}
         metrics |= {"critic_loss": loss, "q_mean": jnp.mean(q), "q_std": jnp.mean(jnp.std(q, axis=0)),
                     "diversity": diversity}
-        if cfg.cql_alpha > 0:
-            penalty = self.cql_penalty(params, state, batch, q, k_cql)
-            loss = loss + cfg.cql_alpha * penalty
-            metrics["cql_penalty"] = penalty
-        return loss + cfg.eta * diversity, metrics
+        return loss + cfg.eta * diversity, metrics, q
 
     def actor_loss(self, params, state: SACNState, batch: Batch, key: jax.Array):
         action, log_prob = self.sample_policy(params, batch["observations"], key)
@@ -305,15 +292,14 @@ class SACN(Algorithm):
         critic, metrics = gradient_step(state.critic, self.critic_tx, self.critic_loss, state, batch, key, False)
         return state.replace(critic=polyak(critic, self.cfg.tau)), metrics
 
-    def rl_update(self, state: SACNState, batch: Batch, key: jax.Array):
-        """CORL's order: temperature, actor, critic (+ target), all on one minibatch; with `simultaneous_update`
-        (CQL) every loss is computed from the incoming state and the three steps are applied together."""
+    def rl_steps(self):
+        """The offline-RL update's three steps, in CORL's order: temperature, actor, critic (+ target)."""
         temperature = lambda state, batch, key: self.temperature_update(state, batch, key, clip=True)  # noqa: E731
-        updates = (temperature, self.actor_update, self.td_update)
-        if not self.cfg.simultaneous_update:
-            return chain(*updates)(state, batch, key)
-        (t, m_t), (a, m_a), (c, m_c) = (fn(state, batch, k) for fn, k in zip(updates, jax.random.split(key, 3)))
-        return state.replace(log_alpha=t.log_alpha, actor=a.actor, critic=c.critic), m_t | m_a | m_c
+        return temperature, self.actor_update, self.td_update
+
+    def rl_update(self, state: SACNState, batch: Batch, key: jax.Array):
+        """The three steps on one minibatch, each seeing the one before (CORL's edac.py)."""
+        return chain(*self.rl_steps())(state, batch, key)
 
 
 FAMILY = Family(SACNConfig, SACN)
@@ -322,10 +308,6 @@ ALGOS = {
     # EDAC's ensemble sizes
     "sacn": Algo("sacn", {"eta": 0.0}, sections=("edac",), skip=("eta",), without_behaviour={}),
     "edac_bc": Algo("sacn", {"bc_weight": 1.0}, sections=("edac",), without_behaviour={"bc_weight": 0.0}),
-    # the authors' CQL configs (their CORL fork's configs/cql/door): cql_min_q_weight 10, policy_lr 3e-5, no entropy in
-    # the backup (CORL's own door/pen configs, added later: cql_alpha 1, policy_lr 1e-4)
-    "cql": Algo("sacn", {"num_critics": 2, "eta": 0.0, "cql_alpha": 10.0, "backup_entropy": False,
-                         "pretrain": "none", "actor_lr": 3e-5, "simultaneous_update": True}),
 }
 # The paper's per-env values (Section 5, Appendix G Table 3), keyed by (family or algorithm, env) as
 # `offrl_jax.algos.ENV_DEFAULTS`: Adroit's pre-training is the paper's 200k updates; EDAC's ensemble sizes and eta
@@ -351,9 +333,5 @@ PRESETS = {
     "authors": {
         "sacn": AUTHORS_CODE | {"hidden_bias": 0.1, "tanh_log_det": "eps", "log_alpha_bound": 10.0,
                                 "pretrain_extra": 1000, "soft_entropy_at": "observations", "critic_fan": "out"},
-        # CORL's cql.py as the authors ran it: orthogonal init of every layer, log-std offset -1 within [-20, 2],
-        # temperature learning rate = policy learning rate, terminals only in the TD target, no EDAC-style output init
-        "cql": AUTHORS_CODE | {"init": "orthogonal_all", "out_init": False, "log_std_bounds": (-20.0, 2.0),
-                               "log_std_offset": -1.0, "alpha_lr": 3e-5, "timeouts": "bootstrap"},
     },
 }

@@ -18,7 +18,7 @@ from offrl_jax.run.bc_level import figure_lines
 from offrl_jax.run.results import all_nan_expected, iqm_band, read_curves, score_matrix, write_figure
 
 ALGO_NAMES = {"td3bc": "TD3+BC", "edac": "EDAC", "td3bc_cql": "TD3+BC+CQL", "edac_bc": "EDAC+BC", "bc": "BC",
-              "cql": "CQL", "sacn": "SAC-N", "iql": "IQL", "rebrac": "ReBRAC"}
+              "cql": "CQL", "calql": "Cal-QL", "sacn": "SAC-N", "iql": "IQL", "rebrac": "ReBRAC"}
 
 
 @functools.cache

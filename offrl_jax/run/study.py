@@ -19,7 +19,6 @@ from offrl_jax.online.config import OnlineConfig
 from offrl_jax.run.provenance import run_record
 from offrl_jax.run.variant import Variant, check_file_name  # noqa: F401  (where a study's users find them)
 
-
 MAX_MEMBERS = 1024  # seeds (x sweep values) trained as one program: ~3 MB each for TD3+BC, ~30 for EDAC on 1M rows
 
 
