@@ -312,8 +312,8 @@ def edac_pairs(state, agent: ref.EDAC):
 
 def edac_setup(log_det: str, recorder: _NoiseRecorder):
     cfg = make_config("edac", preset="authors", num_critics=5, eta=1.0, hidden=(32, 32, 32), tanh_log_det=log_det)
-    assert (cfg.layer_norm_eps, cfg.layer_norm_affine, cfg.backup_entropy, cfg.simultaneous_update) == (
-        1e-5, False, True, False)
+    assert (cfg.layer_norm_eps, cfg.layer_norm_affine, cfg.backup_entropy) == (1e-5, False, True)
+    assert not hasattr(cfg, "simultaneous_update")  # EDAC's losses in turn (CQL's all from the incoming state)
     assert cfg.actor_lr == cfg.critic_lr == cfg.alpha_lr and cfg.init_alpha == 1.0
     algo = make_algorithm(cfg, OBS, ACT, ROWS)
     state = to64(algo.init(jax.random.key(0)))

@@ -494,6 +494,7 @@ class AWAC:
         self.actor_opt.zero_grad()
         actor_loss.backward()
         self.actor_opt.step()
+        polyak(self.critics, self.critics_target, self.tau)
 
 
 # ------------------------------------------------------------------------------------------------------ CQL, Cal-QL
