@@ -23,7 +23,7 @@ sample-efficiency curves) as FIG.png and FIG.pdf:
     python -m experiments.report results/figure2/*-td3bc results/mujoco_medium/default --aggregate td3bc.png
 
 `--merge OUT` first merges the given run directories (one study, each run training some of its variants, e.g. one
-process per variant on a GPU) into OUT, re-summarised across them (`offrl_jax.run.results.merge_runs`), and reports OUT:
+process per variant on a GPU) into OUT, re-summarised across them (`offrl_jax.run.merge.merge_runs`), and reports OUT:
 
     python -m experiments.report --merge runs/door-all runs/door-BC runs/door-CQL
 
@@ -49,10 +49,11 @@ from offrl_jax.app.outputs import RUN_FILES, replaced_dir
 from offrl_jax.run import claim
 from offrl_jax.run.aggregate import aggregate, aggregate_table, arms, claims_table, not_poolable, plot_aggregate
 from offrl_jax.run.figures import behaviour_score, plot_studies
+from offrl_jax.run.merge import merge_runs, merged_differences
 from offrl_jax.run.provenance import recorded_data
 from offrl_jax.run.results import check_curve_algos, check_curve_seeds, pretrain_ends_of, read_curves, short_curves
 from offrl_jax.run.study import Study
-from offrl_jax.run.summary import merge_runs, merged_differences, resummarize, summarize, summary_table as table
+from offrl_jax.run.summary import resummarize, summarize, summary_table as table
 from offrl_jax.system.cli import OneLineParser, being_written, check_writable_dir, check_writable_file, print_error
 
 
