@@ -83,7 +83,7 @@ def drawer(spec: dict) -> str:
 def redraw(summary_of: Callable[[Path, str | None], list[dict]], sources_path: Path = SOURCES,
            studies_path: Path = STUDIES) -> list[Path]:
     """Draw every figure of `sources_path` from its runs, each summarised by `summary_of(run, the data it trained
-    on)` (`experiments.report.run_summary`: as the report reads a run), then record each run's
+    on)` (`experiments.report_runs.run_summary`: as the report reads a run), then record each run's
     curves.csv SHA-256 there; a source that is not its study's current run is refused (ValueError) before anything
     is drawn.  Returns the files written."""
     from offrl_jax.run import figures as drawing

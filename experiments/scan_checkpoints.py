@@ -14,9 +14,10 @@ import json
 from pathlib import Path
 
 from experiments import fidelity
-from offrl_jax.data.generate import summarize, write_minari
+from offrl_jax.data.generate import summarize
 from offrl_jax.data.generate.collect import collect, load_policy
 from offrl_jax.data.generate.ship import read_run
+from offrl_jax.data.generate.write import write_minari
 from offrl_jax.system.cli import OneLineParser, UsageError, check_writable_dir, positive_int, print_error
 
 

@@ -22,6 +22,11 @@ A hyper-parameter sweep (`Driver(..., sweep=("alpha", (1.0, 2.5, 10.0)))`) runs 
 member of the same program: the members' axis is value-major (member j * S + i = value j, seed i), each member
 gets its value as a traced hyper-parameter (`offrl_jax.algos.common.with_hparams`), and member (j, i) equals a
 single run with seed i and value j.
+
+Over 300 lines for a stated reason: the file is one program, the jitted scan of a chunk, with what it is built from:
+its key streams (`seed_keys`), its slices, the members' layout over the devices that it shards and batches over
+(`member_layout`, `over_members`) and the `Driver` that holds them; the promises above (randomness, the member axis,
+a sweep) are facts about those parts together, so split, each part would be read with the others open.
 """
 from __future__ import annotations
 

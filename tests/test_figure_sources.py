@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from experiments import figures, report
+from experiments import figures, report, report_runs
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -97,7 +97,7 @@ def test_redraw_draws_each_figure_from_its_runs_and_records_their_curves(tmp_pat
     sources.write_text(json.dumps({"one.png": {"shows": "a test", "drawn_by": "plot_studies", "panels": [panel]}}))
     studies = tmp_path / "studies.json"
     studies.write_text(json.dumps({panel["study"]: panel["run"]}))
-    written = figures.redraw(report.run_summary, sources, studies)
+    written = figures.redraw(report_runs.run_summary, sources, studies)
     assert written == [tmp_path / "one.png", tmp_path / "one.pdf"]
     assert (tmp_path / "one.png").read_bytes()[:4] == b"\x89PNG"
     [drawn] = json.loads(sources.read_text())["one.png"]["panels"]
@@ -111,7 +111,7 @@ def test_redraw_refuses_a_replaced_source_before_drawing_anything(tmp_path):
     studies = tmp_path / "studies.json"
     studies.write_text(json.dumps({panel["study"]: "results/figure2/hopper-edac-critic9k"}))
     with pytest.raises(ValueError, match="has been replaced by results/figure2/hopper-edac-critic9k"):
-        figures.redraw(report.run_summary, sources, studies)
+        figures.redraw(report_runs.run_summary, sources, studies)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["sources.json", "studies.json"]
 
 

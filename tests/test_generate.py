@@ -269,7 +269,7 @@ def test_shipped_expert_behaves_like_an_expert(name):
 def test_scratch_folders_of_killed_generations_are_removed(tmp_path):
     import os
 
-    from offrl_jax.data.generate import _remove_stale_scratch
+    from offrl_jax.data.generate.write import _remove_stale_scratch
 
     dead = tmp_path / ".minari-tmp-hopper-medium-v0-999999999"
     alive = tmp_path / f".minari-tmp-hopper-medium-v0-{os.getpid()}"

@@ -287,14 +287,16 @@ def test_rollout_replaces_a_video_whole(tmp_path):
 def test_an_unstarted_sac_run_is_discarded_and_a_users_file_kept(tmp_path):
     """Ctrl-C before a new SAC run saved its first state leaves nothing to resume: what it wrote goes, so the same
     --out can start again; a file of the user's in --out stays."""
+    from offrl_jax.data.generate.sac_run import discard_unstarted
+
     out = tmp_path / "out"
     (out / "checkpoints").mkdir(parents=True)
     (out / "replay").mkdir()
     (out / "run.json").write_text("{}")
     (out / "log.jsonl").write_text("")
     (out / "notes.txt").write_text("mine")
-    sac.discard_unstarted(out)
+    discard_unstarted(out)
     assert sorted(p.name for p in out.iterdir()) == ["notes.txt"]
     (out / "notes.txt").unlink()
-    sac.discard_unstarted(out)
+    discard_unstarted(out)
     assert not out.exists()

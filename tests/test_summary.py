@@ -339,7 +339,7 @@ def test_a_run_without_its_behaviour_score_gets_the_cached_data_s_only_where_it_
         tmp_path, monkeypatch, recorded, expected):
     import json
 
-    from experiments import report
+    from experiments import report_runs
     from offrl_jax.run.provenance import fingerprint, run_record
     from offrl_jax.run.summary import behaviour_score
     from tests.conftest import synthetic_dataset
@@ -352,7 +352,7 @@ def test_a_run_without_its_behaviour_score_gets_the_cached_data_s_only_where_it_
     runs = [] if recorded is None else [run_record(cached if recorded == "same" else synthetic_dataset(seed=1),
                                                    "hopper-medium")]
     (tmp_path / "config.json").write_text(json.dumps({"runs": runs}))
-    score = report.recorded_behaviour(tmp_path, "hopper-medium")
+    score = report_runs.recorded_behaviour(tmp_path, "hopper-medium")
     assert score == (behaviour_score(cached) if expected else None) and (score is not None) == expected
     assert fingerprint(cached) != fingerprint(synthetic_dataset(seed=1))
 

@@ -23,7 +23,7 @@ Here:
     then the demonstrations repeated in order until exactly `transitions` rows; a demonstration cut short by the end
     of the dataset ends in a time-out (a cut, not a terminal).  No terminals anywhere.
 
-Written with `offrl_jax.data.generate.write_minari` (Minari format, dataset id `door-cloned-v0`), plus
+Written with `offrl_jax.data.generate.write.write_minari` (Minari format, dataset id `door-cloned-v0`), plus
 `out_dir/offrl_jax.json` (provenance and statistics) and `out_dir/bc_policy.msgpack` (the BC actor's variables,
 `flax.serialization.to_bytes`; apply `DeterministicActor(28, hidden)` to `(obs - obs_mean) / obs_std` from the json).
 """
@@ -203,8 +203,8 @@ def generate_door_cloned(demos: Dataset, transitions: int | None = None, out_dir
     directory (default `dataset_dir("door-cloned")`; an existing one raises unless overwrite)."""
     import flax.serialization
 
-    from offrl_jax.data.generate import write_minari
     from offrl_jax.data.generate.collect import summarize
+    from offrl_jax.data.generate.write import write_minari
     from offrl_jax.envs.registry import get_env_spec
 
     cap, transitions = transitions, int(transitions or DEFAULT_TRANSITIONS)

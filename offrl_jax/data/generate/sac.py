@@ -1,5 +1,6 @@
-"""Online SAC in JAX, the behaviour-policy trainer of the generated D4RL-style datasets: the training loop, its run
-directory and the command line.  The learner (networks, losses, the update) is `sac_learner.SAC`.
+"""Online SAC in JAX, the behaviour-policy trainer of the generated D4RL-style datasets: the training loop and the
+command line.  The learner (networks, losses, the update) is `sac_learner.SAC`; the run directory's state (saving,
+resuming, checking) is `sac_run`.
 
 Uniform-random actions for the first `warmup_steps` env steps, then one jitted update per env step fused with choosing
 the next action (`SAC.update_and_act`) on a minibatch of the replay of every transition seen so far.
@@ -35,21 +36,17 @@ import flax.serialization
 import numpy as np
 
 from offrl_jax.data.generate.collect import evaluate, make_gen_env
-from offrl_jax.data.generate.replay import ReplayBuffer, chunk_range, reload_replay
+from offrl_jax.data.generate.replay import ReplayBuffer, reload_replay
 from offrl_jax.data.generate.sac_learner import (
     SACConfig,
-    SACState,
-    check_state_bytes,
     make_sac,
     state_from_bytes,
-    state_to_bytes,
 )
+from offrl_jax.data.generate.sac_run import check_new_run, discard_unstarted, resume_info, save_state
 from offrl_jax.envs.registry import get_env_spec, normalized_score
-from offrl_jax.system.checkpoint import atomic_write_bytes, atomic_write_text
 from offrl_jax.system.cli import (
     OneLineParser,
     check_writable_dir,
-    file_for_run_dir,
     int_at_least,
     lock_run_dir,
     number,
@@ -80,7 +77,7 @@ def train(
     """
     out = Path(out_dir)
     if resume:
-        run, saved, cfg = _resume_info(out)
+        run, saved, cfg = resume_info(out)
         start = int(saved["step"])
         env_name, seed, eval_every, eval_episodes = run["env"], run["seed"], run["eval_every"], run["eval_episodes"]
         steps = max(steps or run["steps"], start)
@@ -162,7 +159,7 @@ def train(
                 ckpt.write_bytes(flax.serialization.to_bytes(state.actor.params))
                 buffer.save_range(out / "replay" / f"{saved_upto:07d}_{step:07d}.npz", saved_upto, step)
                 saved_upto = step
-                _save_state(out, state, rng, step)
+                save_state(out, state, rng, step)
                 now = time.time()
                 entry = {"step": step, "eval_return": last_eval, "eval_returns": returns.round(1).tolist(),
                          "normalized_score": round(score, 2), "train_return": last_train_return,
@@ -202,59 +199,6 @@ def train(
     return run
 
 
-def _save_state(out: Path, state: SACState, rng: np.random.Generator, step: int) -> None:
-    """The whole training state after `step` env steps (atomic: a kill leaves the previous one)."""
-    atomic_write_bytes(out / "state.msgpack", state_to_bytes(state))
-    atomic_write_text(out / "state.json", json.dumps({"step": step, "rng": rng.bit_generator.state}))
-
-
-def check_new_run(out: Path) -> None:
-    """Raise FileExistsError (one line) if `out` holds what a SAC run writes: a new run there would mix with it."""
-    out = Path(out)
-    if not out.is_dir():
-        return
-    found = [n for n in ("run.json", "state.json", "state.msgpack") if (out / n).exists()]
-    if (out / "log.jsonl").is_file() and (out / "log.jsonl").stat().st_size > 0:
-        found.append("log.jsonl")
-    found += [f"{d}/" for d in ("checkpoints", "replay") if (out / d).is_dir() and any((out / d).iterdir())]
-    if found:
-        raise FileExistsError(f"{out} already holds a SAC run ({', '.join(found)}); use a new --out or --resume")
-
-
-def _resume_info(out: Path) -> tuple[dict[str, Any], dict[str, Any], SACConfig]:
-    """(run.json, state.json: {"step", "rng"}, config) of a run to resume; ValueError (one line) for a directory
-    that holds no complete run to continue."""
-    if refusal := file_for_run_dir(out, "a SAC run directory", "run.json"):
-        raise FileNotFoundError(refusal)
-    if not (out / "run.json").is_file() or not (out / "state.json").is_file():
-        raise FileNotFoundError(f"{out}: nothing to resume (needs run.json and state.json from a run of this version)")
-    try:
-        run, saved = json.loads((out / "run.json").read_text()), json.loads((out / "state.json").read_text())
-        needed = {"run.json": (run, ("env", "seed", "steps", "eval_every", "eval_episodes", "config", "checkpoints")),
-                  "state.json": (saved, ("step", "rng"))}
-        for name, (content, keys) in needed.items():
-            if missing := [k for k in keys if k not in content]:
-                raise ValueError(f"{name} has no {', '.join(missing)}")
-        start = int(saved["step"])
-        get_env_spec(run["env"])
-        cfg = SACConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in run["config"].items()})
-        upto = 0  # replay chunks must cover the first `start` steps without a gap
-        for lo, hi in sorted(chunk_range(f) for f in (out / "replay").glob("*.npz")):
-            upto = hi if lo == upto else upto
-    except (OSError, ValueError, KeyError, TypeError, AttributeError) as e:
-        raise ValueError(f"{out}: not a SAC run that can be resumed ({type(e).__name__}: {e})") from None
-    if not (out / "state.msgpack").is_file():
-        raise FileNotFoundError(f"{out}: nothing to resume (state.msgpack is missing)")
-    if upto < start:
-        raise FileNotFoundError(f"{out}/replay holds the first {upto} transitions, not the {start} the saved state "
-                                "needs")
-    try:
-        check_state_bytes((out / "state.msgpack").read_bytes())
-    except ValueError as e:
-        raise ValueError(f"{out}: {e}") from None
-    return run, saved, cfg
-
-
 def main(argv: list[str] | None = None) -> int:
     p = OneLineParser(prog="offrl_jax.data.generate.sac", description=__doc__,
                       formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -280,7 +224,7 @@ def main(argv: list[str] | None = None) -> int:
             if given := [flag for flag, value in settings.items() if value is not None]:
                 p.error(f"{', '.join(given)}: a resumed run keeps its own settings; give only --resume DIR "
                         "(and --steps, --stop-score)")
-            _resume_info(a.resume)
+            resume_info(a.resume)
             check_writable_dir(a.resume)
         else:
             if missing := [flag for flag in ("--env", "--out") if settings[flag] is None]:
@@ -313,22 +257,6 @@ def main(argv: list[str] | None = None) -> int:
         print(f"interrupted; resume with --resume {a.resume or a.out}", file=sys.stderr)
         return 130
     return 0
-
-
-def discard_unstarted(out: Path) -> None:
-    """Remove what a new run wrote in `out` before its first saved state (nothing there can be resumed), so that
-    the same --out can start again; files of others in `out` stay."""
-    if (out / "state.json").exists():
-        return
-    for name in ("run.json", "log.jsonl", "state.msgpack"):
-        (out / name).unlink(missing_ok=True)
-    for folder, pattern in (("checkpoints", "actor_*.msgpack"), ("replay", "*.npz")):
-        for f in (out / folder).glob(pattern):
-            f.unlink()
-        if (out / folder).is_dir() and not any((out / folder).iterdir()):
-            (out / folder).rmdir()
-    if out.is_dir() and not any(out.iterdir()):
-        out.rmdir()
 
 
 if __name__ == "__main__":
