@@ -98,6 +98,7 @@ def test_handwritten_runs_unrolled_seeds():
     assert run(seeds=2, mode="unrolled", calls=2, reps=1) > 0
 
 
+@pytest.mark.slow  # one of the suite's longest (1-5 min on 2 busy cores); -m slow runs it
 def test_device_check_runs_on_a_cpu_with_a_tiny_budget(tmp_path):
     """The GPU check script itself, at a tiny budget: every section of its one results file is there."""
     from benchmarks import device_check

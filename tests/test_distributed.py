@@ -61,6 +61,7 @@ def runs(tmp_path_factory):
     return base / "one", base / "two"
 
 
+@pytest.mark.slow  # one of the suite's longest (1-5 min on 2 busy cores); -m slow runs it
 def test_two_processes_equal_one(runs):
     one, two = rows(runs[0]), rows(runs[1])
     assert one.keys() == two.keys() and len(one) == 3 * 3
@@ -72,6 +73,7 @@ def test_two_processes_equal_one(runs):
                 assert abs(x - y) <= 1e-6 * max(1.0, abs(x)), (key, name, x, y)
 
 
+@pytest.mark.slow  # shares test_two_processes_equal_one's two-process runs (the suite's longest set-up)
 def test_process_zero_writes_one_set_of_files(runs):
     two = runs[1]
     summary = json.loads((two / "summary.json").read_text())

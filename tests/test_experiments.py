@@ -110,6 +110,7 @@ def test_existing_output_is_never_overwritten(tmp_path, tiny_hdf5):
     assert (out / "keep.txt").read_text() == "precious"
 
 
+@pytest.mark.slow  # one of the suite's longest (1-5 min on 2 busy cores); -m slow runs it
 def test_overwrite_replaces_an_earlier_run_only_once_the_new_one_can_start(tmp_path, tiny_hdf5):
     from offrl_jax.run.study import Study, Variant
 
@@ -243,6 +244,7 @@ def test_sigterm_is_a_stop_with_the_resume_command(tmp_path, tiny_hdf5, backgrou
     assert ("\n" + err).count("\ninterrupted; resume") == 1, err  # on a line of its own, not on the progress bar's
 
 
+@pytest.mark.slow  # one of the suite's longest (1-5 min on 2 busy cores); -m slow runs it
 def test_ctrl_c_stops_the_worker_processes_and_the_run_resumes(tmp_path, tiny_hdf5):
     """Ctrl-C as a terminal sends it (SIGINT to the whole process group; the two variants train in worker
     processes): the parent tells the workers to stop, exits 130 with the resume command and no traceback, and the
@@ -311,6 +313,7 @@ def test_vmapped_alpha_sweep_equals_separate_runs(tmp_path, tiny_dataset):
     assert [s["final_score_mean"] for s in together] == pytest.approx([s["final_score_mean"] for s in apart], abs=0.5)
 
 
+@pytest.mark.slow  # one of the suite's longest (1-5 min on 2 busy cores); -m slow runs it
 def test_config_replays_a_saved_run_and_resume_refuses_other_settings(tmp_path, tiny_hdf5):
     """--config FILE re-runs a run exactly; --resume refuses changed settings (writing nothing) but extends
     --updates from the last checkpoint, equal to a run made that long from the start."""

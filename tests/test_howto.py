@@ -10,6 +10,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from offrl_jax.data.readers import load_dataset_path
 
 HOWTO = Path(__file__).resolve().parents[1] / "docs" / "howto.md"
@@ -39,6 +41,7 @@ def run_shell(code: str, cwd: Path) -> list[subprocess.CompletedProcess]:
     return done
 
 
+@pytest.mark.slow  # one of the suite's longest (1-5 min on 2 busy cores); -m slow runs it
 def test_the_recipes_run_as_written(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     blocks = recipes()

@@ -164,6 +164,7 @@ def test_finetune_runs_end_to_end_and_a_resume_inside_the_online_phase_recompute
     assert sorted((key(r), r["score"]) for r in again) == sorted((key(r), r["score"]) for r in rows)
 
 
+@pytest.mark.slow  # one of the suite's longest (1-5 min on 2 busy cores); -m slow runs it
 def test_a_run_killed_inside_the_online_phase_goes_on_from_its_last_checkpoint_exactly(tmp_path):
     """SIGKILL after the first online evaluation: --resume restores every env's MuJoCo state, the episodes under way
     and the online buffers, and continues from that env step; the curves equal the uninterrupted run's."""
@@ -338,6 +339,7 @@ def test_warm_up_evaluations_are_read_back_beside_the_hand_over_row(tmp_path):
         read_curves(tmp_path / "curves.csv")
 
 
+@pytest.mark.slow  # one of the suite's longest (1-5 min on 2 busy cores); -m slow runs it
 def test_finetune_from_a_finished_offline_run_starts_at_its_checkpoint(tmp_path):
     offline = tmp_path / "offline"
     argv = ["--env", "hopper", "--updates", "400", "--eval-every", "200", "--seeds", "2", "--max-transitions",
