@@ -80,12 +80,11 @@ class Variant:
             value = lambda x: tuple(x) if isinstance(x, list) else x  # noqa: E731  JSON has lists; configs use tuples
             try:
                 pairs = {k: value(x) for k, x in entry["overrides"]}
+                if not all(isinstance(k, str) for k in pairs):
+                    raise TypeError
             except (TypeError, ValueError):
                 raise ValueError(f"variant {label!r}: overrides = {entry['overrides']!r:.80} must be (name, value) "
                                  "pairs") from None
-            if not all(isinstance(k, str) for k in pairs):
-                raise ValueError(f"variant {label!r}: overrides = {entry['overrides']!r:.80} must be (name, value) "
-                                 "pairs")
             flags = entry.get("flags")
             if flags is not None and (isinstance(flags, str) or not all(isinstance(f, str) for f in flags)):
                 raise ValueError(f"variant {label!r}: flags = {flags!r} must be names of its overrides")
