@@ -99,7 +99,7 @@ def update_flops(config, phase: str, obs_dim: int, act_dim: int, batch: int = 25
         raise ValueError(f"unknown TD3BC phase {phase!r}")
 
     # soft family (EDAC / SAC-N / EDAC+BC / CQL)
-    actor = mlp_dims(obs_dim, h, 2 * act_dim)
+    actor = mlp_dims(obs_dim, tuple(getattr(config, "actor_hidden", None) or h), 2 * act_dim)
     q_grad: Grad = "second_order" if config.eta != 0 else "params"
     m = getattr(config, "cql_actions", 0)  # the CQL family's (algos/cql.py)
 

@@ -57,6 +57,7 @@ class Case:
     phase: str  # label reported in the JSON
     phase_name: str  # `Phase.name` inside algo.phases(...)
     overrides: tuple[tuple[str, Any], ...] = ()
+    tag: str = ""  # told apart in the label: the same algorithm and phase with other overrides
 
     @property
     def config(self):
@@ -65,7 +66,8 @@ class Case:
     @property
     def label(self) -> str:
         n = self.config.num_critics
-        return f"{self.algo}/{self.phase}" + (f"/N={n}" if self.algo in ("edac", "sacn", "edac_bc") else "")
+        return (f"{self.algo}/{self.phase}" + (f"/N={n}" if self.algo in ("edac", "sacn", "edac_bc") else "")
+                + (f"/{self.tag}" if self.tag else ""))
 
 
 CASES: list[Case] = [
@@ -81,6 +83,10 @@ CASES: list[Case] = [
     Case("sacn", "offline_rl", "offline_rl", (("num_critics", 50),)),
     Case("edac_bc", "offline_rl", "offline_rl", (("num_critics", 10),)),
     Case("cql", "offline_rl", "offline_rl"),
+    Case("calql", "offline_rl", "offline_rl"),
+    # Cal-QL with CORL's cal_ql.py networks: critics 2x256, actor 3x256, no LayerNorm
+    Case("calql", "offline_rl", "offline_rl", (("hidden", (256, 256)), ("actor_hidden", (256, 256, 256)),
+                                               ("actor_layer_norm", False), ("critic_layer_norm", False)), "corl-net"),
 ]
 QUICK_CASE = Case("bc", "bc", "actor_pretrain")
 
@@ -170,7 +176,8 @@ def init_states(case: Case, max_seeds: int, n_rows: int):
     initialisers takes seconds); the first S of them are exactly S-seed `Driver.init` states.  Cached across cases
     whose networks are the same (e.g. TD3+BC and TD3+BC+CQL)."""
     config = case.config
-    key = (type(config).__name__, config.num_critics, tuple(config.hidden), config.actor_layer_norm,
+    key = (type(config).__name__, config.num_critics, tuple(config.hidden), getattr(config, "actor_hidden", None),
+           config.actor_layer_norm,
            config.critic_layer_norm, getattr(config, "init_alpha", None), max_seeds, n_rows)
     if key not in _INIT_CACHE:
         algo = make_algorithm(config, OBS_DIM, ACT_DIM, n_rows)
@@ -229,6 +236,7 @@ def time_case(case: Case, seeds: int, data: dict[str, jax.Array], all_states, pe
     return {
         "algo": case.algo,
         "phase": case.phase,
+        "tag": case.tag,
         "seeds": seeds,
         "updates_per_s": round(updates_per_s, 2),
         "compile_s": round(compile_s, 2),
@@ -304,8 +312,13 @@ def machine() -> str:
     return f"{cpu}, {os.cpu_count()} logical CPUs, jax {jax.__version__} ({jax.default_backend()})"
 
 
+def shown_algo(r: dict[str, Any]) -> str:
+    """The algorithm's name, with the case's tag where it has one (e.g. calql/corl-net)."""
+    return r["algo"] + (f"/{r['tag']}" if r.get("tag") else "")
+
+
 def format_row(r: dict[str, Any]) -> str:
-    return (f"{r['algo']:<10} {r['phase']:<28} {r['num_critics']:>3} {r['seeds']:>2} {r['updates_per_s']:>9.1f} "
+    return (f"{shown_algo(r):<10} {r['phase']:<28} {r['num_critics']:>3} {r['seeds']:>2} {r['updates_per_s']:>9.1f} "
             f"{r['compile_s']:>7.1f} {r['gflop_per_update']:>8.4f} {r['achieved_gflops']:>8.1f} "
             f"{r['peak_gflops']:>7.1f} {r['pct_of_peak']:>6.1f} {r['load1']:>5.2f}")
 
@@ -320,8 +333,9 @@ def markdown(records: list[dict[str, Any]]) -> str:
             "| load |",
             "|---|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|"]
     for r in records:
-        rows.append(f"| {r['algo']} | {r['phase']} | {r['num_critics']} | {r['seeds']} | {r['updates_per_s']:.1f} | "
-                    f"{r['compile_s']:.1f} | {r['gflop_per_update']:.3f} | {r['achieved_gflops']:.1f} | "
+        rows.append(f"| {shown_algo(r)} | {r['phase']} | {r['num_critics']} | {r['seeds']} | "
+                    f"{r['updates_per_s']:.1f} | {r['compile_s']:.1f} | {r['gflop_per_update']:.3f} | "
+                    f"{r['achieved_gflops']:.1f} | "
                     f"{r['peak_gflops']:.0f} | {r['pct_of_peak']:.0f} | {r['load1']:.1f} |")
     return "\n".join(rows)
 

@@ -29,6 +29,19 @@ def test_flop_counts_by_hand():
     assert edac > sacn > td3 > bc
 
 
+def test_flop_count_of_calql_uses_the_actors_own_widths():
+    """Cal-QL with CORL's networks (critics 2x256, actor 3x256): the CQL terms evaluate the actor on 2 B M rows and
+    the critics on 3 B M rows; the actor's widths are `actor_hidden`, not the critics'."""
+    config = make_config("calql", "hopper", hidden=(256, 256), actor_hidden=(256, 256, 256))
+    total, count = update_flops(config, "offline_rl", 11, 3)
+    actor, critic = mlp_dims(11, (256, 256, 256), 6), mlp_dims(14, (256, 256), 1)
+    terms = dict(count.terms)
+    assert terms["CQL: actor fwd on 2 x B*10"] == eval_flops(actor, 2 * 256 * 10)
+    assert terms["CQL: critics fwd+grad x2 on 3 x B*10"] == eval_flops(critic, 3 * 256 * 10, "params", 2)
+    assert terms["actor fwd+grad"] == eval_flops(actor, 256, "params")
+    assert total == count.total
+
+
 def test_analytic_flops_match_xla_cost_analysis():
     from benchmarks.flops import xla_update_flops
     from offrl_jax.algos import make_algorithm
