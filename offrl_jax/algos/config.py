@@ -45,7 +45,7 @@ class Config:
     gamma: float = 0.99  # discount
     tau: float = 0.005  # Polyak rate of the target networks
     hidden: tuple[int, ...] = (256, 256)  # critic hidden widths (and the actor's unless actor_hidden is set)
-    actor_hidden: tuple[int, ...] | None = None  # None: same as hidden
+    actor_hidden: tuple[int, ...] | None = None  # actor hidden widths; None (unset): the same as hidden
     actor_layer_norm: bool = True  # LayerNorm after every hidden layer of the actor (the paper: on)
     critic_layer_norm: bool = True  # LayerNorm after every hidden layer of the critics (the paper: on)
     layer_norm_affine: bool = True  # learned LN scale/bias; False = the authors' code (elementwise_affine=False)
@@ -66,7 +66,10 @@ class Config:
     # this variant's offline updates (pre-training included) in place of the study's budget; None: the study's
     # (the fine-tuning study's online-rl arm: 0, no offline phase)
     offline_updates: int | None = None
-    pretrain_auto_window: int = 1_000  # must divide the evaluation interval
+    # with --pretrain-updates auto: updates per window over which the losses are averaged (must divide the
+    # evaluation interval)
+    pretrain_auto_window: int = 1_000
+    # with --pretrain-updates auto: the relative improvement per window below which a phase ends
     pretrain_auto_tol: float = 0.01
     lam: float = 0.0  # TD weight in critic pre-training (0 = pure MC; the paper: 0 or 0.1)
     # how lam mixes: the authors' normalised losses (loss) or eq. 5's targets (target)
