@@ -27,6 +27,15 @@ process per variant on a GPU) into OUT, re-summarised across them (`offrl_jax.ru
 
     python -m experiments.report --merge runs/door-all runs/door-BC runs/door-CQL
 
+With `--relabel`, the runs may be of different algorithms on the same data and budget (say fine-tuning runs of
+`experiments.finetune --algo calql` and `--algo td3bc`, each with a `pretrained` arm): every variant is labelled
+`<algorithm>-<label>` (`calql-scratch`, `td3bc-pretrained`), the from-scratch reference is the one run's that has
+it, relabelled, and the runs' study names may differ (the merged study is named after the dataset and the
+algorithms, `hopper-medium-calql+td3bc`).  Everything else must agree as without it (seeds, updates, evaluations,
+online settings, the data), and one table then compares every arm, with one threshold for all of them:
+
+    python -m experiments.report --merge runs/ft-all --relabel runs/ft-calql runs/ft-td3bc runs/ft-iql
+
 `--plot FIG.png` draws every study given as one panel of one figure (and FIG.pdf beside it), laid out as the
 paper's Figure 2 (rows: environments, columns: algorithms) when each (environment, algorithm) is one study, or all
 in one panel with `--overlay` (`offrl_jax.run.figures`):
@@ -49,7 +58,7 @@ from offrl_jax.app.outputs import RUN_FILES
 from offrl_jax.run import claim
 from offrl_jax.run.aggregate import aggregate, aggregate_table, arms, claims_table, not_poolable, plot_aggregate
 from offrl_jax.run.figures import plot_studies
-from offrl_jax.run.merge import merge_runs, merged_differences
+from offrl_jax.run.merge import merge_runs, merged_differences, relabelled
 from offrl_jax.run.results import read_curves
 from offrl_jax.run.study import Study
 from offrl_jax.run.summary import summary_table as table
@@ -94,6 +103,9 @@ def main(argv=None) -> int:
     p.add_argument("--curves", action="store_true", help="also the seed-mean score at every evaluation")
     p.add_argument("--merge", type=Path, metavar="OUT",
                    help="merge the run directories (one study, different variants) into OUT (a new directory)")
+    p.add_argument("--relabel", action="store_true",
+                   help="with --merge: runs of different algorithms (their study names may differ), each variant "
+                        "labelled <algorithm>-<label> (td3bc-pretrained)")
     p.add_argument("--plot", type=Path, metavar="FIG.png", help="also draw every study as a panel of one figure")
     p.add_argument("--overlay", action="store_true", help="with --plot: every study in one panel")
     p.add_argument("--aggregate", type=Path, metavar="FIG.png",
@@ -121,6 +133,8 @@ def main(argv=None) -> int:
             raise ValueError(f"{twice} is given twice (a study counts once)")
         if args.overlay and args.plot is None:
             raise ValueError("--overlay draws into the figure of --plot FIG.png; give --plot too")
+        if args.relabel and not args.merge:
+            raise ValueError("--relabel labels the variants of the runs --merge OUT joins; give --merge too")
         if args.merge:
             for d in args.dirs:
                 check_settled(d)
@@ -153,8 +167,9 @@ def main(argv=None) -> int:
                 what = "already holds a run" if (args.merge / "config.json").exists() else "is not empty"
                 raise FileExistsError(f"{args.merge} {what}; merge into a new directory")
             check_writable_dir(args.merge)
-            merge_runs(args.dirs, args.merge)
-            if differ := merged_differences([Study.from_json((d / "config.json").read_text()) for d in args.dirs]):
+            merge_runs(args.dirs, args.merge, relabel=args.relabel)
+            studies = [Study.from_json((d / "config.json").read_text()) for d in args.dirs]
+            if differ := merged_differences([relabelled(s) for s in studies] if args.relabel else studies):
                 print(f"warning: the merged variants differ in more than their pre-training: {'; '.join(differ)}",
                       file=sys.stderr)
             args.dirs = [args.merge]
