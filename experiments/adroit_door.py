@@ -33,14 +33,22 @@ VARIANTS = {
     "pre-trained TD3+BC+CQL": ("td3bc_cql", "actor+critic"),
     "EDAC+BC": ("edac_bc", "none"),
     "pre-trained EDAC+BC": ("edac_bc", "actor+critic"),
+    # beyond the paper's table: the fine-tuning baselines of the Adroit benchmarks, with and without pre-training
+    "Cal-QL": ("calql", "none"),
+    "pre-trained Cal-QL": ("calql", "actor+critic"),
+    "AWAC": ("awac", "none"),
+    "pre-trained AWAC": ("awac", "actor+critic"),
 }
+PAPER_VARIANTS = list(VARIANTS)[:8]  # Table 2's rows
 
 
 def build(args) -> Study:
     s = args.scale
     # the paper's protocol, scaled: 300k updates, evaluation every 10k, the score over the last 100k; pre-training
     # as long as the paper's per-env value (`offrl_jax.algos.ENV_DEFAULTS`: 200k on door)
-    scaled = lambda algo: int(env_defaults(algo, "door")["pretrain_updates"] * s)  # noqa: E731
+    # (a family without a door value, AWAC: the hybrids')
+    paper = env_defaults("td3bc_cql", "door")["pretrain_updates"]
+    scaled = lambda algo: int(env_defaults(algo, "door").get("pretrain_updates", paper) * s)  # noqa: E731
     updates, pretrain, every = int(300_000 * s), scaled("td3bc_cql"), max(1, int(10_000 * s))
     variants = []
     for label in args.variants:
@@ -65,8 +73,9 @@ def make_parser() -> argparse.ArgumentParser:
                       formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--dataset", choices=("door-human", "door-cloned"), default="door-human",
                    help="the Adroit door dataset (default %(default)s); --dataset-path reads it from a file instead")
-    p.add_argument("--variants", nargs="+", choices=tuple(VARIANTS), default=list(VARIANTS),
-                   help="the algorithms to compare, one variant each (default: all eight)")
+    p.add_argument("--variants", nargs="+", choices=tuple(VARIANTS), default=PAPER_VARIANTS,
+                   help="the algorithms to compare, one variant each (default: the paper's eight; Cal-QL and AWAC, "
+                        "with and without pre-training, on request)")
     p.add_argument("--scale", type=number(0, 10, low_open=True), default=0.1,
                    help="fraction of the paper's update counts, in (0, 10] (default 0.1)")
     p.add_argument("--num-critics", type=positive_int, default=None, help="EDAC(+BC) ensemble size (paper: 50)")

@@ -139,3 +139,19 @@ def test_pretrained_awac_runs_through_the_runner(tmp_path, tiny_dataset):
     run_study(study, tmp_path, tiny_dataset, progress=False)
     rows = read_curves(tmp_path / "curves.csv")
     assert [(r["update"], r["phase"]) for r in rows] == [(200, "pretrain"), (400, "offline_rl")]
+
+
+def test_adroit_door_offers_calql_and_awac_beyond_the_papers_eight():
+    """The door study keeps Table 2's eight variants by default; Cal-QL and AWAC, with and without pre-training, on
+    request, the pre-trained ones as long as the paper's door pre-training (AWAC has no door value of its own)."""
+    from experiments import adroit_door
+
+    parse = adroit_door.make_parser().parse_args
+    assert [v.label for v in adroit_door.build(parse([])).variants] == adroit_door.PAPER_VARIANTS
+    assert len(adroit_door.PAPER_VARIANTS) == 8
+    study = adroit_door.build(parse(["--variants", "Cal-QL", "pre-trained Cal-QL", "AWAC", "pre-trained AWAC"]))
+    configs = {v.label: study.config(v.label) for v in study.variants}
+    assert {label: (c.pretrain, c.pretrain_updates if c.pretrain != "none" else None) for label, c in configs.items()} \
+        == {"Cal-QL": ("none", None), "pre-trained Cal-QL": ("actor+critic", 20_000),
+            "AWAC": ("none", None), "pre-trained AWAC": ("actor+critic", 20_000)}
+    assert configs["AWAC"].awac_lambda == 0.1 and configs["Cal-QL"].calibration
