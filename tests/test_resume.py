@@ -300,3 +300,29 @@ def test_checkpoint_every_evaluation_keeps_one_at_every_evaluation_off_grid_hand
                        variants=(Variant.of("pretrained", "td3bc", pretrain_updates=100, hidden=(32, 32)),))
     run_study(study, tmp_path / "run", synthetic_dataset(), progress=False)
     assert kept_updates(tmp_path / "run", study.variants) == [100, 150, 300]
+
+
+def test_a_resume_keeps_the_rows_of_variants_not_yet_resumed_in_curves_csv(tmp_path, monkeypatch):
+    """Variants in separate groups resume one after another; until a group resumes, its rows stay in curves.csv
+    (they used to vanish from the file, kept only in its checkpoint, while the groups before it ran)."""
+    from offrl_jax.run import progress
+    from offrl_jax.run.results import read_curves
+
+    variants = (Variant.of("a", "td3bc", pretrain="none", hidden=(32, 32)),
+                Variant.of("b", "td3bc", pretrain="none", hidden=(16, 16)))
+    run, ds = tmp_path / "run", synthetic_dataset()
+    run_study(tiny_study(updates=100, variants=variants), run, ds, progress=False)
+    study = tiny_study(variants=variants)
+    assert len(study.groups()) == 2
+    seen, set_rows = [], progress.Recorder.set
+
+    def look_then_stop(self, rows_by_label):
+        set_rows(self, rows_by_label)
+        rows = read_curves(run / "curves.csv")
+        seen.append(sorted({(r["variant"], r["update"]) for r in rows}))
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(progress.Recorder, "set", look_then_stop)
+    with pytest.raises(KeyboardInterrupt):
+        run_study(study, run, ds, resume=True, progress=False)
+    assert seen == [[("a", 100), ("b", 100)]]  # group a restored (its rows from its checkpoint), b's rows kept

@@ -47,10 +47,15 @@ class Progress:
 
 class Recorder:
     """Rows of every variant (in study order), written to curves.csv after each evaluation (and handed to the
-    `logger`, if any; with `path` None, only kept); thread-safe."""
+    `logger`, if any; with `path` None, only kept); thread-safe.  `kept`: a resumed run's rows, from its curves.csv,
+    so that the file keeps the variants whose groups have not resumed yet (each group's restore replaces its
+    variants' rows by its checkpoint's)."""
 
-    def __init__(self, path: Path | None, labels: list[str], logger=None):
+    def __init__(self, path: Path | None, labels: list[str], logger=None, kept: list[dict] = ()):
         self.path, self.rows, self.logger = path, {label: [] for label in labels}, logger
+        for row in kept:
+            if row.get("variant") in self.rows:
+                self.rows[row["variant"]].append(row)
         self.lock, self.stop = threading.Lock(), threading.Event()
 
     def set(self, rows_by_label: dict[str, list[dict]]) -> None:
