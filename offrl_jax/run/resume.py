@@ -182,16 +182,23 @@ def edited_resolved(study: Study, config_path: Path) -> str | None:
         if differ else None
 
 
+def saved_rows(out_dir: Path, warn: bool = False) -> list[dict]:
+    """A run's curves.csv rows; none if the file is missing or cannot be read (it is then written again from the
+    checkpoints, which hold every row), saying so on stderr if `warn`."""
+    curves = out_dir / "curves.csv"
+    try:
+        return read_curves(curves) if curves.is_file() else []
+    except (OSError, ValueError, KeyError) as e:
+        if warn:
+            print(f"warning: {curves} cannot be read ({type(e).__name__}); it is written again from the checkpoints",
+                  file=sys.stderr)
+        return []
+
+
 def check_resume(study: Study, out_dir: Path, ds, data_sha256: str) -> None:
     """Raise ResumeMismatch if a checkpoint in `out_dir` does not belong to `study` on `ds` (see the module)."""
     groups = study.groups()
-    curves = out_dir / "curves.csv"
-    try:
-        rows = read_curves(curves) if curves.is_file() else []
-    except (OSError, ValueError, KeyError) as e:  # it is written again from the checkpoints' rows
-        print(f"warning: {curves} cannot be read ({type(e).__name__}); it is written again from the checkpoints",
-              file=sys.stderr)
-        rows = []
+    rows = saved_rows(out_dir, warn=True)
     if (out_dir / "checkpoints").exists() and not (out_dir / "checkpoints").is_dir():
         raise ResumeMismatch(f"{out_dir / 'checkpoints'} is not a directory; nothing was changed")
     for group, _ in groups:

@@ -35,8 +35,8 @@ from offrl_jax.run.loggers import make_logger
 from offrl_jax.run.online_summary import plot_online
 from offrl_jax.run.progress import Progress, Recorder
 from offrl_jax.run.provenance import fingerprint
-from offrl_jax.run.results import curves_title, plot_curves, read_curves
-from offrl_jax.run.resume import check_resume
+from offrl_jax.run.results import curves_title, plot_curves
+from offrl_jax.run.resume import check_resume, saved_rows
 from offrl_jax.run.study import Study, Variant
 from offrl_jax.run.summary import behaviour_score, summarize, summary_json
 from offrl_jax.system import distributed
@@ -44,15 +44,6 @@ from offrl_jax.system.checkpoint import atomic_write_text
 from offrl_jax.system.workers import run_in_processes
 
 __all__ = ["Diverged", "Stopped", "run_study"]  # the run's two failures are `offrl_jax.run.group`'s
-
-
-def kept_rows(path: Path) -> list[dict]:
-    """A resumed run's curves.csv rows, for the variants not yet resumed; none if the file is missing or unreadable
-    (it is then rewritten from the checkpoints, which hold every row)."""
-    try:
-        return read_curves(path) if path.is_file() else []
-    except (OSError, ValueError):
-        return []
 
 
 def run_study(study: Study, out_dir: Path, dataset: Dataset, resume: bool = False, progress: bool = True,
@@ -96,7 +87,7 @@ def run_study(study: Study, out_dir: Path, dataset: Dataset, resume: bool = Fals
     offline = sum(study.config(v.label).budget(study.updates) for v in study.variants)
     bar = Progress(offline + len(study.variants) * online_updates, progress, quiet=not writer)
     recorder = Recorder(out_dir / "curves.csv" if writer else None, [v.label for v in study.variants],
-                         logger if writer else None, kept_rows(out_dir / "curves.csv") if resume and writer else [])
+                         logger if writer else None, saved_rows(out_dir) if resume and writer else [])
     pretrain_ends: dict[str, int] = {}
     groups = study.groups()
     forms = DeviceForms(dataset)  # the groups run in this process share the dataset's device form(s)
