@@ -83,11 +83,14 @@ def test_report_refuses_an_aggregate_of_one_study_before_any_table(tmp_path, cap
     assert not any(tmp_path.iterdir())
 
 
-def test_a_runs_curves_title_says_what_its_band_is_and_one_seed_has_none():
+def test_a_runs_curves_title_says_what_its_band_is_one_seed_has_none_and_a_long_one_wraps():
     from offrl_jax.run.results import curves_title
     assert (curves_title("hm-td3bc", "hopper-medium", 5)
             == "hm-td3bc: hopper-medium, 5 seeds, IQM and stratified-bootstrap 95% CI")
     assert curves_title("hm-td3bc", "hopper-medium", 1) == "hm-td3bc: hopper-medium, 1 seed: no interval"
+    merged = curves_title("hopper-medium-calql+td3bc+iql", "online phase", 5)  # a merged study's long name
+    assert merged == ("hopper-medium-calql+td3bc+iql: online phase,\n5 seeds, IQM and stratified-bootstrap 95% CI")
+    assert max(len(line) for line in merged.splitlines()) <= 80
 
 
 def test_report_counts_a_study_inside_a_directory_of_studies_once(tmp_path, capsys):

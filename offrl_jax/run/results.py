@@ -199,9 +199,11 @@ def write_figure(fig, path: Path, dpi: int = 120, pdf: bool = False) -> list[Pat
 
 
 def curves_title(name: str, dataset: str, seeds: int) -> str:
-    """The title of a run's curves.png: what the band is, or that one seed has none."""
+    """The title of a run's curves.png: what the band is, or that one seed has none; on two lines where one would
+    run past a 7-inch figure's width (about 80 characters at font size 10)."""
     band = f"{seeds} seeds, IQM and stratified-bootstrap 95% CI" if seeds > 1 else "1 seed: no interval"
-    return f"{name}: {dataset}, {band}"
+    sep = ", " if len(name) + len(dataset) + len(band) + 4 <= 80 else ",\n"
+    return f"{name}: {dataset}{sep}{band}"
 
 
 @all_nan_expected()
