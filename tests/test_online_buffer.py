@@ -85,6 +85,19 @@ def test_partly_filled_member_rows():
     assert int(buf.pending[0]) == 1 and int(buf.drawable(True)[0]) == 2 and int(buf.drawable(False)[0]) == 3
 
 
+def test_a_block_that_ends_no_episode_leaves_the_pending_rows_unwritten():
+    # horizon 5, blocks of 2, no episode ends in either block: the four rows stay pending, their returns 0 (the
+    # second insert once wrote partial returns with a tail over the two rows pending before it), until a block ends
+    # the episode: then 1 + .5*(2 + .5*(3 + .5*(4 + .5*5))) = 3.5625 for a terminal at reward 5
+    buf = new_buffer(1, capacity=8, obs_dim=1, act_dim=1, gamma=0.5, horizon=5)
+    buf = insert(buf, block([[1, 2]]))
+    buf = insert(buf, block([[3, 4]]))
+    assert int(buf.pending[0]) == 4
+    A(member_rows(buf, 0)["returns"], [0, 0, 0, 0])
+    buf = insert(buf, block([[5, 6]], terminals=[[1, 0]]))
+    A(member_rows(buf, 0)["returns"], [3.5625, 5.125, 6.25, 6.5, 5.0, 0.0])
+
+
 def test_returns_match_the_offline_returns_of_the_whole_stream():
     # random episodes of at most 5 steps, blocks of 3, a ring of 16 that wraps many times: every ended episode's
     # rows hold what returns_to_go of the whole stream gives them

@@ -114,8 +114,8 @@ def _insert_member(buf: OnlineBuffer, block: dict[str, jax.Array]) -> OnlineBuff
     w = buf.horizon - 1 + k
     window = (buf.insert_at + k - w + jnp.arange(w)) % cap
     returns = window_returns(arrays["returns"][window], arrays["rewards"][window], arrays["terminals"][window],
-                             arrays["timeouts"][window], w - k - buf.pending, w - k + last_end, buf.gamma,
-                             buf.timeout_tail)
+                             arrays["timeouts"][window], w - k - buf.pending,
+                             jnp.where(last_end >= 0, w - k + last_end, -1), buf.gamma, buf.timeout_tail)
     arrays["returns"] = arrays["returns"].at[window].set(returns)
     return buf.replace(arrays=arrays, insert_at=(buf.insert_at + k) % cap, size=jnp.minimum(buf.size + k, cap),
                        pending=jnp.where(last_end >= 0, k - 1 - last_end, buf.pending + k).astype(jnp.int32))
