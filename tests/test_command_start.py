@@ -81,10 +81,22 @@ def test_ctrl_c_inside_an_import_or_a_gc_callback_comes_again_after_it():
     assert one_line(result.stderr) == "interrupted"
 
 
+def importing_the_command(pid: int, timeout: float = 60.0) -> None:
+    """Waits until process `pid` imports the command's own modules (numpy's extension mapped: experiments.theory
+    imports it after the package's `quiet_start`). Before that Python itself is starting (the wrapper above, then
+    the new interpreter's `site`), and a Ctrl-C there is Python's own KeyboardInterrupt: on a loaded machine that
+    lasts past any fixed sleep."""
+    end = time.monotonic() + timeout
+    while "_multiarray_umath" not in Path(f"/proc/{pid}/maps").read_text():
+        assert time.monotonic() < end, "the command never imported numpy"
+        time.sleep(0.005)
+
+
 def test_a_real_command_interrupted_early_is_one_line():
     proc = subprocess.Popen([*PYTHON, "-m", "experiments.theory"], cwd=ROOT, env=ENV, text=True,
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    time.sleep(0.4)  # importing, or already working: either way one line
+    importing_the_command(proc.pid)
+    time.sleep(0.2)  # importing, or already working: either way one line
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 130

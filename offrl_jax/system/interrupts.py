@@ -1,4 +1,5 @@
-"""Ctrl-C in a command, at any moment: one line and exit 130, never a traceback and never lost.
+"""Ctrl-C in a command, at any moment from its package's first import on: one line and exit 130, never a traceback
+and never lost (before that, in Python's own start-up, a Ctrl-C is Python's).
 
 `quiet_start` (called by the `__init__` of each package that holds commands, so this module imports nothing heavy)
 covers the imports before a command's `main`: a Ctrl-C there ends the process at once, and an exception there (a JAX
