@@ -110,15 +110,16 @@ def _insert_member(buf: OnlineBuffer, block: dict[str, jax.Array]) -> OnlineBuff
     arrays["returns"] = buf.arrays["returns"].at[pos].set(0.0)
     ends = jnp.maximum(block["terminals"], block["timeouts"]) > 0
     last_end = jnp.max(jnp.where(ends, jnp.arange(k), -1))  # -1: no episode ends in this block
+    ended = last_end >= 0
     # the W newest rows, oldest first: the pending rows and the block, preceded by older rows
     w = buf.horizon - 1 + k
     window = (buf.insert_at + k - w + jnp.arange(w)) % cap
     returns = window_returns(arrays["returns"][window], arrays["rewards"][window], arrays["terminals"][window],
                              arrays["timeouts"][window], w - k - buf.pending,
-                             jnp.where(last_end >= 0, w - k + last_end, -1), buf.gamma, buf.timeout_tail)
+                             jnp.where(ended, w - k + last_end, -1), buf.gamma, buf.timeout_tail)
     arrays["returns"] = arrays["returns"].at[window].set(returns)
     return buf.replace(arrays=arrays, insert_at=(buf.insert_at + k) % cap, size=jnp.minimum(buf.size + k, cap),
-                       pending=jnp.where(last_end >= 0, k - 1 - last_end, buf.pending + k).astype(jnp.int32))
+                       pending=jnp.where(ended, k - 1 - last_end, buf.pending + k).astype(jnp.int32))
 
 
 _insert = jax.jit(jax.vmap(_insert_member))

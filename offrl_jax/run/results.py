@@ -202,8 +202,8 @@ def curves_title(name: str, dataset: str, seeds: int) -> str:
     """The title of a run's curves.png: what the band is, or that one seed has none; on two lines where one would
     run past a 7-inch figure's width (about 80 characters at font size 10)."""
     band = f"{seeds} seeds, IQM and stratified-bootstrap 95% CI" if seeds > 1 else "1 seed: no interval"
-    sep = ", " if len(name) + len(dataset) + len(band) + 4 <= 80 else ",\n"
-    return f"{name}: {dataset}{sep}{band}"
+    title = f"{name}: {dataset}, {band}"
+    return title if len(title) <= 80 else f"{name}: {dataset},\n{band}"
 
 
 @all_nan_expected()
