@@ -67,7 +67,8 @@ def update_flops(config, phase: str, obs_dim: int, act_dim: int, batch: int = 25
     c = Count()
     if _is_td3bc(config):
         actor = mlp_dims(obs_dim, h, act_dim)
-        m = config.cql_actions
+        m = getattr(config, "cql_actions", 0)  # TD3+BC's (ReBRAC has no CQL term)
+        q_actor = 1 if hasattr(config, "cql_actions") else n  # ReBRAC's actor loss takes the min over all critics
 
         def bc():
             c.add("actor fwd+grad (BC)", eval_flops(actor, batch, "params"))
@@ -77,7 +78,7 @@ def update_flops(config, phase: str, obs_dim: int, act_dim: int, batch: int = 25
                 c.add("target actor fwd (s')", eval_flops(actor, batch))
                 c.add(f"target critics fwd x{n}", eval_flops(critic, batch, copies=n))
             c.add(f"critics fwd+grad x{n}", eval_flops(critic, batch, "params", n))
-            if config.cql_weight > 0:
+            if getattr(config, "cql_weight", 0.0) > 0:
                 c.add(f"CQL uniform actions: critics fwd+grad x{n} on B*{m}",
                       eval_flops(critic, batch * m, "params", n))
 
@@ -94,7 +95,7 @@ def update_flops(config, phase: str, obs_dim: int, act_dim: int, batch: int = 25
             for _ in range(config.policy_delay):
                 critic_step(rl=True)
             c.add("actor fwd+grad", eval_flops(actor, batch, "params"))
-            c.add("critic 1 fwd + input-grad (actor loss)", eval_flops(critic, batch, "input", 1))
+            c.add(f"critics fwd + input-grad x{q_actor} (actor loss)", eval_flops(critic, batch, "input", q_actor))
             return c.total / config.policy_delay, c
         raise ValueError(f"unknown TD3BC phase {phase!r}")
 

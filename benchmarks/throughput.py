@@ -43,7 +43,7 @@ import numpy as np
 from benchmarks.flops import chain_flops, update_flops
 from offrl_jax.algos import make_algorithm, make_config
 from offrl_jax.data.dataset import Dataset
-from offrl_jax.data.device import device_data
+from offrl_jax.data.device import device_data, for_updates
 from offrl_jax.driver import CHUNK, INIT, make_chunk_fn, member_layout, seed_keys
 from offrl_jax.system.cli import OneLineParser, check_writable_file, number, positive_int
 
@@ -75,6 +75,7 @@ CASES: list[Case] = [
     Case("td3bc", "mc_critic_pretrain", "pretrain", (("pretrain", "critic"),)),
     Case("td3bc", "offline_rl", "offline_rl"),
     Case("td3bc_cql", "offline_rl", "offline_rl"),
+    Case("rebrac", "offline_rl", "offline_rl"),
     Case("edac", "soft_bc_pretrain", "actor_pretrain", (("num_critics", 10),)),
     Case("edac", "soft_return_critic_pretrain", "critic_pretrain", (("num_critics", 10),)),
     Case("edac", "offline_rl", "offline_rl", (("num_critics", 10),)),
@@ -206,7 +207,7 @@ def time_case(case: Case, seeds: int, data: dict[str, jax.Array], all_states, pe
     layout = member_layout(seeds, mode=mode)  # as `Driver` places them; padded with copies of the last seed
     states = layout.place(jax.tree.map(lambda x: x[:seeds], all_states))  # own buffers (donated)
     keys = layout.place(seed_keys(tuple(range(seeds)), CHUNK))
-    data = jax.device_put(data, layout.replicated)
+    data = jax.device_put(for_updates(data, config.needs()), layout.replicated)  # e.g. ReBRAC's next actions
     tic = time.perf_counter()
     compiled = make_chunk_fn(phase, BATCH, calls, layout=layout).lower(states, data, keys, jnp.int32(0)).compile()
     compile_s = time.perf_counter() - tic
