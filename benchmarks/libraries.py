@@ -17,14 +17,17 @@ both see the same background load; compile time and set-up are excluded from bot
 Matched: hopper shapes (obs 11, act 3), a synthetic dataset of `--transitions` rows, batch 256, twin critics, the
 actor and targets updated every 2nd critic update, Adam; TD3+BC 2x256 with LayerNorm before every ReLU in actor and
 critic (d3rlpy has no such option: its adapter builds the encoder from torch modules; ajax-rl's from its layer
-strings); ReBRAC 3x256, LayerNorm in the critic only (fql's own default is 4x512).  Not matched, each library's own:
-how a batch is drawn (theirs: numpy or flashbax; ours: an index draw inside the jitted scan), ajax-rl's observation
-normalisation inside every network call, d3rlpy's critics run one after the other.
+strings); ReBRAC 3x256 with ReLU, LayerNorm in the critic only (fql's own defaults: 4x512, GELU).  Not matched,
+each library's own way, kept: how a batch is drawn (theirs: numpy or flashbax; ours: an index draw inside the jitted
+scan); ajax-rl's observation normalisation inside every network call; d3rlpy's critics run one after the other, and
+its and ajax-rl's actor losses evaluate both critics where ours evaluates the first (d3rlpy's backward also computes
+the critics' weight gradients, then drops them); fql's one Adam steps every parameter each update, targets too.
 
 Reported: critic updates per second (one gradient step of the twin critics; ours = `updates_per_s`, theirs
-`critic_updates_per_s`), each side's median over its repeats, per pair and the median over pairs, and the ratio
-ours / theirs.  A table goes to stdout (with --json: one JSON object), progress to stderr; `--out NAME` appends the
-object to results/benchmarks/NAME.jsonl (or NAME if a path; `benchmarks.throughput.results_path`).
+`critic_updates_per_s`), each side's median over its 3 timed repeats (ours: ~2 s chunks after a warm-up one; theirs:
+after a warm-up), per pair, the medians over pairs, and the median of the pairs' ratios ours / theirs; pairs
+alternate which side runs first.  A table goes to stdout (with --json: one JSON object), progress to stderr;
+`--out NAME` appends the object to results/benchmarks/NAME.jsonl (or NAME if a path; `throughput.results_path`).
 """
 from __future__ import annotations
 
@@ -58,11 +61,13 @@ class Library:
 
 LIBRARIES = {
     "d3rlpy": Library("td3bc", "d3rlpy_td3bc.py", 500, "python3.11 -m venv V && V/bin/pip install torch==2.13.0 "
-                      "d3rlpy==2.8.1", ("--threads", "1")),
+                      "--index-url https://download.pytorch.org/whl/cpu && V/bin/pip install d3rlpy==2.8.1",
+                      ("--threads", "1")),
     "ajax-rl": Library("td3bc", "ajax_rl_td3bc.py", 2000, "python3.12 -m venv V && V/bin/pip install ajax-rl==0.4.0 "
                        "jax==0.10.2 jaxlib==0.10.2 flax==0.12.8   # our jax, so one XLA times both"),
-    "fql": Library("rebrac", "fql_rebrac.py", 1000, "python3.11 -m venv V && V/bin/pip install 'jax==0.10.2' "
-                   "flax optax distrax ml_collections; git clone https://github.com/seohongpark/fql  (--source)",
+    "fql": Library("rebrac", "fql_rebrac.py", 1000, "python3.11 -m venv V && V/bin/pip install jax==0.10.2 "
+                   "flax==0.12.8 optax==0.2.8 distrax ml_collections; git clone https://github.com/seohongpark/fql "
+                   "(--source)",
                    source=True),
 }
 
@@ -71,28 +76,36 @@ def log(*args) -> None:
     print(*args, file=sys.stderr, flush=True)
 
 
-def run_json(cmd: list[str], core: int, what: str) -> list[dict]:
-    """Run `cmd` pinned to `core` with one thread; its stdout's JSON lines (one line and exit 1 if it fails)."""
-    pin = ["taskset", "-c", str(core)] if shutil.which("taskset") else []  # no fork-time hook: JAX has threads
+def run_json(cmd: list[str], core: int | None, what: str, key: str) -> list[dict]:
+    """Run `cmd` pinned to `core` (None: unpinned) with one thread; its stdout's JSON lines, each with `key` (one
+    line and exit 1 if it fails or prints none)."""
+    pin = [] if core is None else ["taskset", "-c", str(core)]  # no fork-time hook: JAX has threads
     proc = subprocess.run(pin + cmd, capture_output=True, text=True, env=os.environ | ONE_THREAD)
-    lines = [json.loads(line) for line in proc.stdout.splitlines() if line.startswith("{")]
-    if proc.returncode or not lines:
+    try:
+        lines = [json.loads(line) for line in proc.stdout.splitlines() if line.startswith("{")]
+        rates = [float(line[key]) for line in lines]
+    except (ValueError, KeyError, TypeError) as e:
+        sys.exit(f"error: {what} printed a line that is not its JSON result ({type(e).__name__}: {e})")
+    if proc.returncode or not rates:
         tail = (proc.stderr.strip().splitlines() or ["(no output)"])[-1]
         sys.exit(f"error: {what} failed (exit {proc.returncode}): {tail}")
     return lines
 
 
-def ours(lib: Library, transitions: int, core: int) -> float:
+def ours(lib: Library, transitions: int, core: int | None) -> float:
+    """The median of 3 timed ~2 s chunks after a warm-up one (no chunk is 'heavy' here: `--heavy-s` out of reach)."""
     lines = run_json([sys.executable, "-m", "benchmarks.throughput", "--algo", lib.algo, "--phase", "offline_rl",
-                      "--seeds", "1", "--json", "--transitions", str(transitions), "--target-s", "2", "--reps", "3"],
-                     core, f"ours ({lib.algo})")
+                      "--seeds", "1", "--json", "--transitions", str(transitions), "--target-s", "2", "--reps", "3",
+                      "--heavy-s", "1e9"], core, f"ours ({lib.algo})", "updates_per_s")
     return float(lines[0]["updates_per_s"])
 
 
-def theirs(lib: Library, python: str, source: Path | None, transitions: int, core: int) -> float:
+def theirs(lib: Library, python: str, source: Path | None, transitions: int, core: int | None) -> tuple[float, dict]:
+    """The median of their adapter's 3 repeats, and its last line (versions, compile and set-up times)."""
     cmd = [python, str(ADAPTERS / lib.adapter), "--transitions", str(transitions), "--updates", str(lib.updates),
            "--repeats", "3", *lib.extra, *(["--source", str(source)] if source else [])]
-    return statistics.median(float(r["critic_updates_per_s"]) for r in run_json(cmd, core, f"theirs ({lib.adapter})"))
+    lines = run_json(cmd, core, f"theirs ({lib.adapter})", "critic_updates_per_s")
+    return statistics.median(float(r["critic_updates_per_s"]) for r in lines), lines[-1]
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -122,11 +135,18 @@ def main(argv: list[str] | None = None) -> dict:
         p.error(f"--core {args.core}: not one of this process's cores {cores}")
     out_path = results_path(p, args.out)
 
+    core = args.core if shutil.which("taskset") else None
+    if core is None:
+        log("warning: no taskset here: both sides run unpinned")
     start = datetime.datetime.now()
-    pairs = []
-    for i in range(args.pairs):
-        a = ours(lib, args.transitions, args.core)
-        b = theirs(lib, args.python, args.source, args.transitions, args.core)
+    pairs, info = [], {}
+    for i in range(args.pairs):  # ours first in even pairs, theirs first in odd ones: a drift hits both
+        if i % 2:
+            b, info = theirs(lib, args.python, args.source, args.transitions, core)
+            a = ours(lib, args.transitions, core)
+        else:
+            a = ours(lib, args.transitions, core)
+            b, info = theirs(lib, args.python, args.source, args.transitions, core)
         pairs.append({"ours": a, "theirs": b, "ratio": round(a / b, 3)})
         log(f"pair {i + 1}/{args.pairs}: ours {a:.1f}, {args.library} {b:.1f} critic updates/s, ratio {a / b:.2f}")
     result = {
@@ -134,7 +154,8 @@ def main(argv: list[str] | None = None) -> dict:
         "ours_critic_updates_per_s": round(statistics.median(x["ours"] for x in pairs), 2),
         "theirs_critic_updates_per_s": round(statistics.median(x["theirs"] for x in pairs), 2),
         "ratio": round(statistics.median(x["ratio"] for x in pairs), 3), "pairs": pairs,
-        "transitions": args.transitions, "core": args.core, "date": start.isoformat(timespec="seconds"),
+        "theirs_last_line": info, "transitions": args.transitions, "core": core,
+        "date": start.isoformat(timespec="seconds"),
         "machine": machine(), "load_avg": [round(x, 2) for x in os.getloadavg()],
         "command": " ".join(["python", "-m", "benchmarks.libraries", *(argv if argv is not None else sys.argv[1:])]),
     }
@@ -144,7 +165,7 @@ def main(argv: list[str] | None = None) -> dict:
         print(f"{args.library} ({lib.algo}), one core, critic updates/s, median of {args.pairs} pairs:")
         print(f"  ours {result['ours_critic_updates_per_s']:.1f}   theirs {result['theirs_critic_updates_per_s']:.1f}"
               f"   ours / theirs {result['ratio']:.2f}x (pairs: "
-              + ", ".join(f"{x['ratio']:.2f}" for x in pairs) + ")")
+              + ", ".join(f"{x['ratio']:.2f}" for x in pairs) + "; the ratio is the median of the pairs' ratios)")
     if out_path is not None:
         append_results(out_path, [result])
         log(f"appended to {out_path}")

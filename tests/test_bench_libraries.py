@@ -42,15 +42,21 @@ def test_pairs_alternate_and_the_ratio_is_ours_over_theirs(capsys, tmp_path, mon
     assert json.loads(capsys.readouterr().out) == result == json.loads(out.read_text())
 
 
-def test_a_failing_side_is_one_line_and_exit_1(capsys, tmp_path, monkeypatch):
+@pytest.mark.parametrize("script, said", [
+    ("import sys\nsys.exit('error: no d3rlpy here')\n", "failed (exit 1): error: no d3rlpy here"),
+    ("print('{\"rate\": 1}')\n", "printed a line that is not its JSON result (KeyError"),
+    ("print('{not json')\n", "printed a line that is not its JSON result (JSONDecodeError"),
+])
+def test_a_failing_side_is_one_line_and_exit_1(capsys, tmp_path, monkeypatch, script, said):
     adapter = tmp_path / "broken.py"
-    adapter.write_text("import sys\nsys.exit('error: no d3rlpy here')\n")
+    adapter.write_text(script)
     monkeypatch.setattr(libraries, "ADAPTERS", tmp_path)
     monkeypatch.setitem(libraries.LIBRARIES, "d3rlpy", libraries.Library("td3bc", adapter.name, 10, "none"))
     monkeypatch.setattr(libraries, "ours", lambda lib, n, core: 90.0)
     with pytest.raises(SystemExit) as exit_:
         libraries.main(["d3rlpy", "--python", sys.executable, "--pairs", "1"])
-    assert "theirs (broken.py) failed (exit 1): error: no d3rlpy here" in str(exit_.value.code)
+    message = str(exit_.value.code)
+    assert message.startswith("error: theirs (broken.py) ") and said in message and "\n" not in message
 
 
 def test_rebrac_flops_count_both_critics_in_the_actor_loss():

@@ -6,9 +6,12 @@ PYTHON: an interpreter with jax, flax, optax, distrax and ml_collections; CHECKO
 and `utils/` are imported from there, never copied.  Their loop body, as `main.py` runs it offline: a numpy batch
 from their `ReplayBuffer` (`return_next_actions` on, as `main.py` sets it for rebrac), then the jitted
 `agent.update(batch, full_update=(i % actor_freq == 0))`: one critic update per call, the actor and targets every
-`actor_freq` (2).  Their `get_config()` except the widths (`--hidden`, both networks; theirs 4x512, ours 3x256) and
-the batch (256, theirs too); LayerNorm in the critic only, as theirs and ours.  One warm-up of K updates (it compiles
-both `full_update` variants), then R timed repeats; one JSON line per repeat on stdout.
+`actor_freq` (2).  Their `get_config()` except the widths (`--hidden`, both networks; theirs 4x512, ours
+3x256), the batch (256, theirs too) and the activation (`--activation`: ReLU as ours, where their MLP's default is
+GELU); LayerNorm in the critic only, as ours (theirs after the activation, ours before it: the same work).  Their
+one Adam steps every parameter each update (the actor's and the targets' too, with zero gradients) and logs
+gradient statistics: their loop's own cost, kept.  One warm-up of K updates (it compiles both `full_update`
+variants), then R timed repeats; one JSON line per repeat on stdout.
 """
 import argparse
 import json
@@ -23,15 +26,26 @@ p.add_argument("--updates", type=int, default=1000, help="critic updates (calls 
 p.add_argument("--repeats", type=int, default=3)
 p.add_argument("--hidden", type=int, nargs="+", default=[256, 256, 256])
 p.add_argument("--batch", type=int, default=256)
+p.add_argument("--activation", choices=("relu", "gelu"), default="relu",
+               help="hidden activation: relu, ours (default), or gelu, their MLP's default")
 a = p.parse_args()
 if not (a.source / "agents" / "rebrac.py").is_file():
     sys.exit(f"error: {a.source}: no agents/rebrac.py (--source takes a checkout of github.com/seohongpark/fql)")
 sys.path.insert(0, str(a.source.resolve()))
 
+import flax.linen as nn  # noqa: E402
 import jax  # noqa: E402
 import numpy as np  # noqa: E402
+import utils.networks  # noqa: E402
 from agents.rebrac import ReBRACAgent, get_config  # noqa: E402
 from utils.datasets import ReplayBuffer  # noqa: E402
+
+if a.activation == "relu":  # their Value and Actor build `MLP` by its module-global name: a subclass stands in
+
+    class ReluMLP(utils.networks.MLP):
+        activations: object = nn.relu
+
+    utils.networks.MLP = ReluMLP
 
 rng = np.random.default_rng(0)
 n = a.transitions
@@ -68,7 +82,7 @@ for r in range(a.repeats):
     agent = loop(agent, a.updates)
     wall, cpu = time.perf_counter() - tic, time.process_time() - cpu
     print(json.dumps({"library": "fql", "algo": "rebrac", "jax": jax.__version__, "repeat": r, "updates": a.updates,
-                      "hidden": a.hidden, "critic_layer_norm": config["layer_norm"],
+                      "hidden": a.hidden, "activation": a.activation, "critic_layer_norm": config["layer_norm"],
                       "actor_layer_norm": config["actor_layer_norm"], "batch": config["batch_size"],
                       "warmup_s": round(warmup_s, 2), "wall_s": round(wall, 3), "cpu_s": round(cpu, 3),
                       "critic_updates_per_s": round(a.updates / wall, 2)}), flush=True)
