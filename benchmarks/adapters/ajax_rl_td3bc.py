@@ -26,7 +26,7 @@ How it is timed (the way ajax's own training runs):
   3. jit(vmap(resume)) is compiled ahead of time (lower().compile(): compile_s = trace + lower + compile,
      no update run); ajax's persistent compile cache (ajax/_compile_cache.py) is switched off
      (AJAX_NO_COMPILE_CACHE=1) unless --compile-cache.
-     Each repeat then times one call, jax.block_until_ready on the returned state.
+     One untimed call, then each repeat times one call, jax.block_until_ready on the returned state.
   Excluded: evaluation and logging (logging_config=None: ajax.log.evaluate_and_log returns before
   tracing the evaluation, log.py:278-279; no W&B/TensorBoard worker is started), the replay fill.
   Included (ajax's loop does them every update): the flashbax replay sample, in-agent observation
@@ -216,6 +216,8 @@ def main() -> None:
         jax.block_until_ready(state)
         return state, time.perf_counter() - t, time.process_time() - cpu
 
+    state, warmup_s, _ = call(state)  # one untimed call first, as the other adapters warm up
+    log(f"warm-up call: {warmup_s:.2f}s")
     for r in range(args.repeats):
         before = steps(state)
         state, dt, cpu_s = call(state)
