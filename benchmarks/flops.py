@@ -145,7 +145,8 @@ def xla_update_flops(algo, phase, obs_dim: int, act_dim: int, batch: int = 256) 
     spec = lambda *shape: jax.ShapeDtypeStruct(shape, jnp.float32)  # noqa: E731
     b = {"observations": spec(k, batch, obs_dim), "next_observations": spec(k, batch, obs_dim),
          "actions": spec(k, batch, act_dim), "rewards": spec(k, batch), "terminals": spec(k, batch),
-         "timeouts": spec(k, batch), "returns": spec(k, batch), "idx": jax.ShapeDtypeStruct((k, batch), jnp.int32)}
+         "timeouts": spec(k, batch), "returns": spec(k, batch), "idx": jax.ShapeDtypeStruct((k, batch), jnp.int32),
+         "next_actions": spec(k, batch, act_dim)}  # read by ReBRAC only
     cost = jax.jit(phase.update).lower(state, b, jax.ShapeDtypeStruct((2,), jnp.uint32)).compile().cost_analysis()
     if isinstance(cost, list):
         cost = cost[0]

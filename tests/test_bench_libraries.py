@@ -68,3 +68,14 @@ def test_rebrac_flops_count_both_critics_in_the_actor_loss():
     assert terms["critics fwd + input-grad x2 (actor loss)"] == eval_flops(critic, 256, "input", 2)
     per_critic_step = eval_flops(actor, 256) + eval_flops(critic, 256, copies=2) + eval_flops(critic, 256, "params", 2)
     assert total == (2 * per_critic_step + eval_flops(actor, 256, "params") + eval_flops(critic, 256, "input", 2)) / 2
+
+
+def test_rebrac_analytic_flops_match_xla_cost_analysis():
+    from benchmarks.flops import xla_update_flops
+    from offrl_jax.algos import make_algorithm
+
+    config = make_config("rebrac", "hopper")
+    algo = make_algorithm(config, 11, 3, 1000)
+    phase = next(p for p in algo.phases(11000) if p.name == "offline_rl")
+    analytic, _ = update_flops(config, phase.name, 11, 3)
+    assert analytic <= xla_update_flops(algo, phase, 11, 3) <= 1.15 * analytic
