@@ -11,6 +11,7 @@ runs=(
   results/mujoco_medium/300k-alpha2.5
   results/figure2/halfcheetah-td3bc-5seeds
   results/figure2/halfcheetah-td3bc-100k
+  results/figure2/hopper-td3bc-500k
   results/figure2/walker2d-td3bc-5seeds
   results/figure2/halfcheetah-edac-gpu-150k
   results/figure2/walker2d-edac-gpu-150k
