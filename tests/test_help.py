@@ -25,6 +25,8 @@ def entry_points() -> list[str]:
     found = []
     for folder in ("offrl_jax", "experiments", "benchmarks"):
         for path in sorted((ROOT / folder).rglob("*.py")):
+            if ROOT / "benchmarks" / "adapters" in path.parents:  # run by other libraries' interpreters, not ours
+                continue
             if path.name == "__main__.py":
                 found.append(".".join(path.relative_to(ROOT).parent.parts))
             elif re.search(r'^if __name__ == "__main__":', path.read_text(), re.MULTILINE):

@@ -138,16 +138,16 @@ def architecture(hidden: list[int], layer_norm: bool) -> tuple[str, ...]:
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--transitions", type=int, default=100_000)
+    p.add_argument("--transitions", type=int, default=100_000, help="synthetic dataset rows")
     p.add_argument("--updates", type=int, default=2000, help="critic updates (scan iterations) per timed call")
-    p.add_argument("--repeats", type=int, default=3)
-    p.add_argument("--seeds", type=int, default=1)
-    p.add_argument("--batch", type=int, default=256)
-    p.add_argument("--hidden", type=int, nargs="+", default=[256, 256])
+    p.add_argument("--repeats", type=int, default=3, help="timed calls, after one untimed call")
+    p.add_argument("--seeds", type=int, default=1, help="seeds, vmapped as ajax-rl runs them")
+    p.add_argument("--batch", type=int, default=256, help="minibatch rows")
+    p.add_argument("--hidden", type=int, nargs="+", default=[256, 256], help="hidden widths, actor and critics")
     p.add_argument("--layer-norm", choices=("both", "critic", "actor", "none"), default="both",
                    help="LayerNorm after every hidden Dense, before ReLU, in these networks (ajax TD3: none)")
-    p.add_argument("--policy-delay", type=int, default=2)
-    p.add_argument("--alpha", type=float, default=2.5)
+    p.add_argument("--policy-delay", type=int, default=2, help="critic updates per actor update")
+    p.add_argument("--alpha", type=float, default=2.5, help="TD3+BC's alpha")
     p.add_argument("--compile-cache", action="store_true", help="keep ajax's persistent compile cache on (its default)")
     p.add_argument("--no-normalize-obs", action="store_true", help="drop TD3+BC's in-agent observation normalisation")
     args = p.parse_args()
