@@ -10,8 +10,8 @@
 Their side runs `benchmarks/adapters/<library>.py` with their interpreter (`--python`: a virtual environment where
 their package is installed, made as `INSTALL` below says); fql is not a package: `--source` names a checkout, whose
 `agents/` and `utils/` are imported from there, never copied.  Our side runs `python -m benchmarks.throughput` for
-the matching case with this interpreter.  Each pair runs ours, then theirs, each a fresh process pinned to core
-`--core` with one thread (XLA_FLAGS=--xla_cpu_multi_thread_eigen=false, OMP/MKL 1, torch.set_num_threads(1)), so
+the matching case with this interpreter.  Each pair runs both, each a fresh process pinned to core `--core` with
+one thread (XLA_FLAGS=--xla_cpu_multi_thread_eigen=false, OMP/MKL 1, torch.set_num_threads(1)), so
 both see the same background load; compile time and set-up are excluded from both rates.
 
 Matched: hopper shapes (obs 11, act 3), a synthetic dataset of `--transitions` rows, batch 256, twin critics, the
@@ -76,9 +76,9 @@ def log(*args) -> None:
     print(*args, file=sys.stderr, flush=True)
 
 
-def run_json(cmd: list[str], core: int | None, what: str, key: str) -> list[dict]:
-    """Run `cmd` pinned to `core` (None: unpinned) with one thread; its stdout's JSON lines, each with `key` (one
-    line and exit 1 if it fails or prints none)."""
+def run_json(cmd: list[str], core: int | None, what: str, key: str) -> tuple[list[float], list[dict]]:
+    """Run `cmd` pinned to `core` (None: unpinned) with one thread; the rates (`key`) of its stdout's JSON lines, and
+    the lines (one line and exit 1 if it fails or prints none)."""
     pin = [] if core is None else ["taskset", "-c", str(core)]  # no fork-time hook: JAX has threads
     proc = subprocess.run(pin + cmd, capture_output=True, text=True, env=os.environ | ONE_THREAD)
     try:
@@ -89,23 +89,23 @@ def run_json(cmd: list[str], core: int | None, what: str, key: str) -> list[dict
     if proc.returncode or not rates:
         tail = (proc.stderr.strip().splitlines() or ["(no output)"])[-1]
         sys.exit(f"error: {what} failed (exit {proc.returncode}): {tail}")
-    return lines
+    return rates, lines
 
 
 def ours(lib: Library, transitions: int, core: int | None) -> float:
     """The median of 3 timed ~2 s chunks after a warm-up one (no chunk is 'heavy' here: `--heavy-s` out of reach)."""
-    lines = run_json([sys.executable, "-m", "benchmarks.throughput", "--algo", lib.algo, "--phase", "offline_rl",
-                      "--seeds", "1", "--json", "--transitions", str(transitions), "--target-s", "2", "--reps", "3",
-                      "--heavy-s", "1e9"], core, f"ours ({lib.algo})", "updates_per_s")
-    return float(lines[0]["updates_per_s"])
+    rates, _ = run_json([sys.executable, "-m", "benchmarks.throughput", "--algo", lib.algo, "--phase", "offline_rl",
+                         "--seeds", "1", "--json", "--transitions", str(transitions), "--target-s", "2", "--reps",
+                         "3", "--heavy-s", "1e9"], core, f"ours ({lib.algo})", "updates_per_s")
+    return rates[0]
 
 
 def theirs(lib: Library, python: str, source: Path | None, transitions: int, core: int | None) -> tuple[float, dict]:
     """The median of their adapter's 3 repeats, and its last line (versions, compile and set-up times)."""
     cmd = [python, str(ADAPTERS / lib.adapter), "--transitions", str(transitions), "--updates", str(lib.updates),
            "--repeats", "3", *lib.extra, *(["--source", str(source)] if source else [])]
-    lines = run_json(cmd, core, f"theirs ({lib.adapter})", "critic_updates_per_s")
-    return statistics.median(float(r["critic_updates_per_s"]) for r in lines), lines[-1]
+    rates, lines = run_json(cmd, core, f"theirs ({lib.adapter})", "critic_updates_per_s")
+    return statistics.median(rates), lines[-1]
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -116,7 +116,8 @@ def main(argv: list[str] | None = None) -> dict:
     p.add_argument("library", choices=sorted(LIBRARIES), help="whose training loop to time against ours")
     p.add_argument("--python", required=True, metavar="PATH", help="the interpreter that has their library")
     p.add_argument("--source", type=Path, metavar="PATH", help="fql only: a checkout of github.com/seohongpark/fql")
-    p.add_argument("--pairs", type=positive_int, default=3, help="ours-then-theirs pairs (%(default)s)")
+    p.add_argument("--pairs", type=positive_int, default=3,
+                   help="pairs of runs, alternately ours or theirs first (%(default)s)")
     p.add_argument("--transitions", type=positive_int, default=100_000, help="synthetic dataset rows (%(default)s)")
     p.add_argument("--core", type=int, help="the core both sides are pinned to (default: this process's first)")
     p.add_argument("--json", action="store_true", help="one JSON object on stdout instead of a table")
