@@ -4,7 +4,7 @@
     python -m benchmarks.device_check --quick               # a CPU smoke test of the script itself (~1 minute)
 
 It appends JSON lines to a results file (default results/benchmarks/device-<device kind>-<date>.jsonl, see
-`benchmarks.throughput.results_path`): a {"meta": ...} line, one line per case, a {"main_job": ...} line, with
+`benchmarks.common.results_path`): a {"meta": ...} line, one line per case, a {"main_job": ...} line, with
 - the device, JAX version and backend (in the meta line);
 - the float32 matmul rate (8192², precision "highest") and the TF32 / default-precision rate, in TFLOP/s;
 - TD3+BC and EDAC (N = 10) offline-RL updates/s, summed over members, for members = 1, 8, 64, 256 (seeds or
@@ -28,7 +28,8 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 
-from benchmarks.throughput import CASES, append_results, init_states, results_path, synthetic_data, time_case
+from benchmarks.common import append_results, results_path, synthetic_data
+from benchmarks.throughput import CASES, init_states, time_case
 from offrl_jax.system.cli import OneLineParser, positive_int
 
 ROOT = Path(__file__).resolve().parents[1]

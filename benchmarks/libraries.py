@@ -27,7 +27,7 @@ Reported: critic updates per second (one gradient step of the twin critics; ours
 `critic_updates_per_s`), each side's median over its 3 timed repeats (ours: ~2 s chunks after a warm-up one; theirs:
 after a warm-up), per pair, the medians over pairs, and the median of the pairs' ratios ours / theirs; pairs
 alternate which side runs first.  A table goes to stdout (with --json: one JSON object), progress to stderr;
-`--out NAME` appends the object to results/benchmarks/NAME.jsonl (or NAME if a path; `throughput.results_path`).
+`--out NAME` appends the object to results/benchmarks/NAME.jsonl (or NAME if a path; `common.results_path`).
 """
 from __future__ import annotations
 
@@ -42,7 +42,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from benchmarks.throughput import append_results, machine, results_path
+from benchmarks.common import append_results, machine, results_path
 from offrl_jax.system.cli import OneLineParser, positive_int
 
 ADAPTERS = Path(__file__).parent / "adapters"

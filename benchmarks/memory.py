@@ -26,7 +26,7 @@ def child(algo: str, seeds: int, transitions: int) -> dict:
     import jax
     import numpy as np
 
-    from benchmarks.throughput import synthetic_data
+    from benchmarks.common import synthetic_data
     from offrl_jax.algos import make_algorithm, make_config
     from offrl_jax.driver import Driver
 
@@ -63,7 +63,7 @@ def main(argv=None) -> int:
         return 0
     out_path = None
     if args.out is not None:
-        from benchmarks.throughput import results_path
+        from benchmarks.common import results_path
 
         out_path = results_path(p, args.out)  # checked before the work
     rows = []
@@ -85,7 +85,7 @@ def main(argv=None) -> int:
         for r in rows:
             print(json.dumps(r))
     if out_path is not None:
-        from benchmarks.throughput import append_results
+        from benchmarks.common import append_results
 
         cmd = "python -m benchmarks.memory " + " ".join(sys.argv[1:] if argv is None else argv)
         append_results(out_path, [{"meta": {"command": cmd}}, *rows])

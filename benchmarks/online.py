@@ -47,7 +47,7 @@ import gymnasium as gym
 import jax
 import numpy as np
 
-from benchmarks.throughput import ACT_DIM, BATCH, OBS_DIM, append_results, log, machine, results_path, synthetic_dataset
+from benchmarks.common import ACT_DIM, BATCH, OBS_DIM, append_results, log, machine, results_path, synthetic_dataset
 from offrl_jax.algos import ALGOS, make_algorithm, make_config
 from offrl_jax.data.device import device_data
 from offrl_jax.driver import Driver

@@ -38,7 +38,7 @@ def _time_programs(programs: int, seeds: int, calls: int, transitions: int, star
     import jax
     import jax.numpy as jnp
 
-    from benchmarks.throughput import ACT_DIM, OBS_DIM, synthetic_data
+    from benchmarks.common import ACT_DIM, OBS_DIM, synthetic_data
     from offrl_jax.algos import make_algorithm, make_config
     from offrl_jax.driver import CHUNK, INIT, make_chunk_fn, seed_keys
 

@@ -107,7 +107,7 @@ def program(algo_name: str, num_critics: int, transitions: int, updates: int):
     import jax
     import jax.numpy as jnp
 
-    from benchmarks.throughput import ACT_DIM, OBS_DIM, synthetic_data
+    from benchmarks.common import ACT_DIM, OBS_DIM, synthetic_data
     from offrl_jax.algos import make_algorithm, make_config
     from offrl_jax.driver import Driver, make_chunk_fn
 
@@ -186,7 +186,7 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     if args.num_critics != 10 and args.algo != "edac":
         p.error("--num-critics is EDAC's ensemble size; TD3+BC has two critics")
-    from benchmarks.throughput import append_results, results_path
+    from benchmarks.common import append_results, results_path
 
     out_path = results_path(p, args.out)  # checked writable before the work
     print(f"compiling and tracing {args.algo} ...", file=sys.stderr, flush=True)

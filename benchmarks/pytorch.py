@@ -59,7 +59,8 @@ def run_torch(algos: list[str], reps: int, as_json: bool) -> None:
 
 def compare(algos: list[str], rounds: int) -> None:
     """JAX (driver chunk function, S = 1) and PyTorch timed alternately, so both see the same background load."""
-    from benchmarks.throughput import CASES, chain_rate, init_states, synthetic_data, time_case
+    from benchmarks.common import chain_rate, synthetic_data
+    from benchmarks.throughput import CASES, init_states, time_case
 
     data = synthetic_data(ROWS)
     replay = Replay()

@@ -37,7 +37,7 @@ def _measure(seeds: int, updates: int, chunks: int, members: str | None = None) 
     """In this process (already set up for its case): the seed-summed updates per second of the timed chunks."""
     import jax
 
-    from benchmarks.throughput import ACT_DIM, OBS_DIM, synthetic_data
+    from benchmarks.common import ACT_DIM, OBS_DIM, synthetic_data
     from offrl_jax.algos import make_algorithm, make_config
     from offrl_jax.driver import Driver
 

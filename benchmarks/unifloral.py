@@ -48,7 +48,7 @@ import flax.linen
 import jax
 import jax.numpy as jnp
 
-from benchmarks.throughput import ACT_DIM, BATCH, OBS_DIM, append_results, results_path, synthetic_data
+from benchmarks.common import ACT_DIM, BATCH, OBS_DIM, append_results, results_path, synthetic_data
 from offrl_jax.algos import make_algorithm, make_config
 from offrl_jax.driver import CHUNK, INIT, make_chunk_fn, member_layout, seed_keys
 from offrl_jax.system.cli import OneLineParser, positive_int

@@ -286,14 +286,14 @@ def test_out_refuses_an_unusable_place_before_any_work(capsys, tmp_path, name):
 
 
 def test_results_path_names_and_markdown_of_an_appended_file(capsys, tmp_path, monkeypatch):
-    from benchmarks import throughput
+    from benchmarks import common, throughput
 
     parser = throughput.OneLineParser()
-    monkeypatch.setattr(throughput, "RESULTS_DIR", tmp_path / "results")
-    assert throughput.results_path(parser, None) is None
-    assert throughput.results_path(parser, "mine") == tmp_path / "results" / "mine.jsonl"
-    assert throughput.results_path(parser, "mine.jsonl") == tmp_path / "results" / "mine.jsonl"  # not .jsonl.jsonl
-    assert throughput.results_path(parser, str(tmp_path / "x" / "y")) == tmp_path / "x" / "y"
+    monkeypatch.setattr(common, "RESULTS_DIR", tmp_path / "results")
+    assert common.results_path(parser, None) is None
+    assert common.results_path(parser, "mine") == tmp_path / "results" / "mine.jsonl"
+    assert common.results_path(parser, "mine.jsonl") == tmp_path / "results" / "mine.jsonl"  # not .jsonl.jsonl
+    assert common.results_path(parser, str(tmp_path / "x" / "y")) == tmp_path / "x" / "y"
     assert not (tmp_path / "results").exists() and not (tmp_path / "x").exists()  # checked, nothing made
 
     row = {"algo": "bc", "phase": "bc", "num_critics": 2, "seeds": 1, "updates_per_s": 10.0, "compile_s": 1.0,
@@ -301,7 +301,7 @@ def test_results_path_names_and_markdown_of_an_appended_file(capsys, tmp_path, m
     out = tmp_path / "two-runs.jsonl"
     for run in ("first", "second"):
         meta = {"command": f"the {run} run", "date": "today", "machine": "this one", "load_avg": [0.5]}
-        throughput.append_results(throughput.results_path(parser, str(out)), [{"meta": meta}, row])
+        common.append_results(common.results_path(parser, str(out)), [{"meta": meta}, row])
     assert throughput.main(["--markdown", str(out)]) == [row, row]
     text = capsys.readouterr().out
     assert text.count("| algo |") == 2 and "the first run" in text and "the second run" in text
