@@ -66,10 +66,13 @@ def test_d4rl_without_next_observations_or_timeouts(tmp_path):
     np.testing.assert_array_equal(ds.next_observations[inner], obs[inner + 1])
     for end in (14, 29, 39):  # no recorded successor: the row's own observation
         np.testing.assert_array_equal(ds.next_observations[end], obs[end])
+    assert list(np.flatnonzero(ds.timeouts)) == [29, 39]  # the file's last step, cut inside its episode: a time-out
     del arrays["timeouts"]
     with pytest.warns(UserWarning, match="inferred 0 time-outs at hopper's 1000-step limit"):
         ds = read_d4rl_hdf5(write_h5(tmp_path / "no_timeouts.hdf5", arrays))
-    assert ds.timeouts.sum() == 0 and ds.terminals.sum() == 1
+    assert list(np.flatnonzero(ds.timeouts)) == [39] and ds.terminals.sum() == 1
+    arrays["next_observations"] = arrays["observations"] + 1.0  # a recorded successor: the last row is a real step
+    assert read_d4rl_hdf5(write_h5(tmp_path / "with_next.hdf5", arrays)).timeouts.sum() == 0
 
 
 def test_d4rl_without_timeouts_gets_them_at_the_time_limit(tmp_path):
@@ -81,12 +84,12 @@ def test_d4rl_without_timeouts_gets_them_at_the_time_limit(tmp_path):
     del arrays["timeouts"]
     with pytest.warns(UserWarning, match="inferred 2 time-outs"):
         ds = read_d4rl_hdf5(write_h5(tmp_path / "hopper-old.hdf5", arrays))
-    assert list(np.flatnonzero(ds.timeouts)) == [999, 2500]
+    assert list(np.flatnonzero(ds.timeouts)) == [999, 2500, 2599]  # and the cut at the file's end
     ambiguous = d4rl_arrays(T=30, obs_dim=17, act_dim=6)  # halfcheetah or walker2d, and no name hint
     del ambiguous["timeouts"]
     with pytest.warns(UserWarning, match="env is unknown"):
         ds = read_d4rl_hdf5(write_h5(tmp_path / "data.hdf5", ambiguous))
-    assert ds.timeouts.sum() == 0
+    assert list(np.flatnonzero(ds.timeouts)) == [29]
 
 
 def test_env_inference():
@@ -158,6 +161,35 @@ def test_minari_episode_of_length_zero(minari_root, tmp_path):
     with pytest.raises(DatasetError) as err:
         read_minari(path)
     assert_one_line(err, path, "episode_6", "length 0")
+
+
+@pytest.mark.parametrize("key", ["observations", "actions", "rewards", "terminations"])
+def test_minari_episode_with_a_single_value_for_an_array(minari_root, tmp_path, key):
+    path = _copy_minari(minari_root, tmp_path)
+    with h5py.File(path / "data/main_data.hdf5", "a") as f:
+        del f["episode_0"][key]
+        f["episode_0"][key] = np.float32(0.0)
+    with pytest.raises(DatasetError) as err:
+        read_minari(path)
+    assert_one_line(err, path, f"episode_0/{key}", "single value")
+
+
+@pytest.mark.parametrize("key, flags, shown", [("terminations", [0.5], "0 or 1"), ("truncations", [np.nan], "0 or 1"),
+                                               ("truncations", [2], "0 or 1"), ("terminations", "mid", "step 0 of")])
+def test_minari_episode_flags_are_0_or_1_and_only_at_the_end(minari_root, tmp_path, key, flags, shown):
+    """Cast to bool, 0.5, NaN or 2 would read as True: a 3-step episode would silently become three."""
+    path = _copy_minari(minari_root, tmp_path)
+    with h5py.File(path / "data/main_data.hdf5", "a") as f:
+        x = np.asarray(f["episode_0"][key][()], np.float64)
+        if flags == "mid":
+            x[0] = 1  # an end flag before the episode's last step
+        else:
+            x[-1] = flags[0]
+        del f["episode_0"][key]
+        f["episode_0"][key] = x
+    with pytest.raises(DatasetError) as err:
+        read_minari(path)
+    assert_one_line(err, path, f"episode_0/{key}", shown)
 
 
 def test_minari_episode_group_with_another_name(minari_root, tmp_path):
@@ -449,3 +481,29 @@ def test_a_value_beyond_float32_is_non_finite_in_one_line(tmp_path):
         with pytest.raises(DatasetError) as err:
             read_d4rl_hdf5(path)
     assert_one_line(err, path, "rewards contains 1 non-finite", "beyond float32's range")
+
+
+@pytest.mark.parametrize("arrays, shown", [
+    (dict(observations=np.zeros((0, 39)), actions=np.zeros((0, 28)), rewards=np.zeros(0),
+          episode_lengths=np.zeros(0, int)), "empty"),
+    (dict(observations=np.float32(0), actions=np.float32(0), rewards=np.float32(0), episode_lengths=[1]),
+     "observations has shape ()"),
+])
+def test_npz_demonstrations_empty_or_scalar_are_one_line(tmp_path, arrays, shown):
+    path = tmp_path / "demos.npz"
+    np.savez(path, **arrays)
+    with pytest.raises(DatasetError) as err:
+        load_dataset_path(path)
+    assert_one_line(err, path, shown)
+
+
+def test_an_npz_with_d4rl_keys_is_checked_against_the_env_it_is_given(tmp_path):
+    """Named door, an .npz of other dims is refused; with no env its dims name one, when they can."""
+    path = tmp_path / "odd.npz"
+    np.savez(path, **d4rl_arrays(T=30, obs_dim=5, act_dim=2))
+    with pytest.raises(DatasetError) as err:
+        load_dataset_path(path, env="door")
+    assert_one_line(err, path, "do not match env 'door'")
+    assert load_dataset_path(path).env is None
+    np.savez(path, **d4rl_arrays(T=30))
+    assert load_dataset_path(path).env == "hopper"

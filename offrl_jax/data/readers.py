@@ -8,7 +8,7 @@ Formats:
   * Adroit demonstrations (`read_door_npz`): concatenated trajectories plus `episode_lengths` (E,).
 
 Every reader ends with `validate`, which raises `DatasetError` with a one-line message "<path>: <problem>".
-One file for the three formats (just over 400 lines): they share `validate` and the path and key checks, and a
+One file for the three formats (about 420 lines): they share `validate` and the path and key checks, and a
 reader looking for how a file on disk becomes a `Dataset` finds every format here.
 """
 from __future__ import annotations
@@ -183,6 +183,9 @@ def d4rl_arrays_to_dataset(path: Path, data: dict, env: str | None = None, clip_
     if "next_observations" not in data and len(data["rewards"]) > 0:
         ends = (np.ravel(data["terminals"]) != 0) | (np.ravel(data["timeouts"]) != 0)
         data["next_observations"] = next_within_episode(np.asarray(data["observations"]), ends)
+        if not ends[-1]:  # the file stops inside an episode and its last step has no successor: mark the cut
+            data["timeouts"] = np.asarray(data["timeouts"], np.float32).copy()
+            data["timeouts"][-1] = 1.0
     data.setdefault("next_observations", data["observations"])  # empty: validate reports it
     ds = Dataset(**{k: data[k] for k in ("observations", "actions", "rewards", "next_observations", "terminals",
                                          "timeouts")}, name=path.stem, source=str(path))
@@ -269,12 +272,24 @@ def _read_minari_episode(path: Path, name: str, group) -> dict[str, np.ndarray]:
             raise DatasetError(f"{path}: {name}/{key} is a group (Dict/Tuple space); only Box spaces are supported")
     obs = group["observations"][()]
     steps = {k: group[k][()] for k in ("actions", "rewards", "terminations", "truncations")}
+    for key, x in {"observations": obs, **steps}.items():
+        if np.ndim(x) == 0:
+            raise DatasetError(f"{path}: {name}/{key} is a single value, not one row per step")
     if len(steps["actions"]) == 0:
         raise DatasetError(f"{path}: {name} has length 0 (no steps)")
     check_lengths(f"{path}: {name}", steps)
     if len(obs) != len(steps["actions"]) + 1:
         raise DatasetError(f"{path}: {name} has {len(obs)} observations for {len(steps['actions'])} actions "
                            f"(expected {len(steps['actions']) + 1})")
+    for key in ("terminations", "truncations"):  # flags: 0 or 1, and set at the last step only
+        x = np.asarray(steps[key])
+        with np.errstate(invalid="ignore"):
+            ok = x.ndim == 1 and x.dtype.kind in "biuf" and bool(np.isin(x, (0, 1)).all())
+        if not ok:
+            raise DatasetError(f"{path}: {name}/{key} must be one flag per step, each 0 or 1")
+        if x[:-1].any():
+            raise DatasetError(f"{path}: {name}/{key} is set at step {int(np.argmax(x[:-1] != 0))} of "
+                               f"{len(x)}: a Minari episode ends at its last step only")
     terminals = np.asarray(steps["terminations"], bool)
     timeouts = np.asarray(steps["truncations"], bool).copy()
     timeouts[-1] |= not terminals[-1]  # an episode stored without an end flag was cut: mark the cut
@@ -319,19 +334,13 @@ def read_minari(path_or_id, env: str | None = None, clip_actions: bool = False) 
 
 
 # ------------------------------------------------------------------------------------------------- Adroit npz
-def door_dims(data: dict) -> bool:
-    """Whether the arrays have Adroit door's observation and action sizes."""
-    spec = ENVS["door"]
-    return (np.ndim(data["observations"]) == 2 and np.shape(data["observations"])[1] == spec.obs_dim
-            and np.ndim(data["actions"]) == 2 and np.shape(data["actions"])[1] == spec.act_dim)
-
-
-def read_door_npz(path, env: str = "door", clip_actions: bool | None = None) -> Dataset:
+def read_door_npz(path, env: str | None = None, clip_actions: bool | None = None) -> Dataset:
     """Adroit demonstrations as .npz: observations (T, o), actions (T, a), rewards (T,), episode_lengths (E,) with
-    sum T.  An .npz with D4RL's keys instead (observations, actions, rewards, terminals, optional timeouts and
-    next_observations) is read as a D4RL file (`d4rl_arrays_to_dataset`; the env inferred from its dims unless
-    they are door's or `env` is given).  The last step of each trajectory is a time-out with no recorded successor,
-    so next_observations is the next row within a trajectory and the row itself at its end; there are no terminals.
+    sum T, checked against `env` (None: door).  An .npz with D4RL's keys instead (observations, actions, rewards,
+    terminals, optional timeouts and next_observations) is read as a D4RL file (`d4rl_arrays_to_dataset`), checked
+    against `env`, or with `env` None against the env its dims name when they name one.  The last step of each
+    trajectory is a time-out with no recorded successor, so next_observations is the next row within a trajectory
+    and the row itself at its end; there are no terminals.
 
     `clip_actions` None means True for demonstrations and False for an .npz with D4RL's keys.  The door human
     demonstrations (the same transitions as D4RL's door-human) contain ~10k action values slightly beyond [-1, 1]
@@ -352,8 +361,7 @@ def read_door_npz(path, env: str = "door", clip_actions: bool | None = None) -> 
     except (OSError, EOFError, zipfile.BadZipFile) as e:
         raise DatasetError(f"{path}: not a readable .npz file ({e or type(e).__name__})") from None
     if "episode_lengths" not in data and all(k in data for k in D4RL_REQUIRED):  # an .npz with D4RL's keys
-        return d4rl_arrays_to_dataset(path, data, None if env == "door" and not door_dims(data) else env,
-                                      clip_actions=bool(clip_actions))
+        return d4rl_arrays_to_dataset(path, data, env, clip_actions=bool(clip_actions))
     found = ', '.join(sorted(data)) or 'none'
     if "episode_lengths" not in data and any(k in data for k in ("terminals", "timeouts", "next_observations")):
         key = next(k for k in D4RL_REQUIRED if k not in data)  # D4RL's keys, one missing: as the .hdf5 reader says
@@ -364,7 +372,11 @@ def read_door_npz(path, env: str = "door", clip_actions: bool | None = None) -> 
     if "episode_lengths" not in data:
         raise DatasetError(f"{path}: missing key 'episode_lengths' (Adroit's demonstrations) or 'terminals' (D4RL's "
                            f"keys) (found: {found})")
+    for key, ndim in (("observations", 2), ("actions", 2), ("rewards", 1)):
+        data[key] = _as_float32(path, key, data[key], ndim)
     check_lengths(path, {k: data[k] for k in ("observations", "actions", "rewards")})
+    if len(data["rewards"]) == 0:
+        raise DatasetError(f"{path}: dataset is empty (0 transitions)")
     raw = np.asarray(data["episode_lengths"]).ravel()
     if raw.dtype.kind not in "iuf":
         raise DatasetError(f"{path}: episode_lengths must be whole numbers of steps, not {raw.dtype}")
@@ -383,11 +395,10 @@ def read_door_npz(path, env: str = "door", clip_actions: bool | None = None) -> 
                            f"{len(data['rewards'])} transitions")
     timeouts = np.zeros(len(data["rewards"]), np.float32)
     timeouts[np.cumsum(lengths) - 1] = 1.0
-    obs = np.asarray(data["observations"])
-    nxt = next_within_episode(obs, timeouts > 0) if obs.ndim == 2 else obs
-    ds = Dataset(obs, data["actions"], data["rewards"], nxt, np.zeros_like(timeouts), timeouts,
-                 name=path.stem, source=str(path))
-    return validate(ds, path, env=env, clip_actions=True if clip_actions is None else clip_actions)
+    obs = data["observations"]
+    ds = Dataset(obs, data["actions"], data["rewards"], next_within_episode(obs, timeouts > 0),
+                 np.zeros_like(timeouts), timeouts, name=path.stem, source=str(path))
+    return validate(ds, path, env=env or "door", clip_actions=True if clip_actions is None else clip_actions)
 
 
 # ------------------------------------------------------------------------------------------------------ dispatch
@@ -401,7 +412,7 @@ def load_dataset_path(path, env: str | None = None, clip_actions: bool | None = 
     if p.suffix.lower() in (".hdf5", ".h5"):
         return read_d4rl_hdf5(p, env=env, **kw)
     if p.suffix.lower() == ".npz":
-        return read_door_npz(p, env=env or "door", **kw)
+        return read_door_npz(p, env=env, **kw)
     if p.exists():
         raise DatasetError(f"{p}: unknown dataset format (expected .hdf5/.h5, .npz or a Minari directory)")
     return read_minari(str(path), env=env, **kw)  # a Minari id, or a clear "no such file" error
