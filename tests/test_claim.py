@@ -53,6 +53,18 @@ def test_the_plateau_is_the_mean_final_and_counts_only_where_flat():
     assert np.isnan(none.level) and none.trend is None and not none.flat and not none.paper
 
 
+def test_a_seed_that_diverged_is_left_out_of_the_plateau_test_as_of_the_level():
+    nan = float("nan")
+    level = np.full((3, 50), 100.0)
+    level[0, 40:] = [90.0] * 5 + [nan] * 5  # fell 10 points, then diverged inside the last window
+    found = claim.plateau(np.array([nan, 100.0, 100.0]), level)
+    # seed 0 has no final and no change: the others' change is 0, the margin 5 % of their level
+    assert found.trend.value == 0.0 and found.margin == pytest.approx(5.0) and found.flat and found.paper
+    level[1:, 44:] = nan  # every seed diverged: no level, so no asymptote for the measure to read
+    found = claim.plateau(np.full(3, nan), level)
+    assert np.isnan(found.level) and not found.flat and not found.paper
+
+
 def test_the_paper_s_measure_needs_ten_evaluations_a_side_to_call_a_plateau_flat():
     # 48 evaluations: round(0.2 * 48) = 10 a side, the fewest that count; 47: round(9.4) = 9
     for evaluations, counts in ((47, False), (48, True)):

@@ -2,6 +2,7 @@
 every seed's updates and seconds to each threshold, the speed-up and the verdict."""
 import json
 
+import numpy as np
 import pytest
 
 from offrl_jax.run.study import Study, Variant
@@ -100,6 +101,8 @@ def test_a_diverged_seed_is_named_and_left_out_of_the_aggregates():
     # a seed that diverged before a threshold never reached it: censored, not dropped
     by = {r["threshold"]: r for r in s["reach"]}
     assert by["90% of best"]["censored"] == [True, True, False]  # 0.9 * 60 = 54: only seed 2 (at 2000)
+    # nor has it a mean over the run: 30, its one evaluation before diverging, would count as if it had held it
+    assert np.isnan(s["auc_scores"][1]) and s["auc_iqm"]["value"] == 35.0  # (15 + 55) / 2
 
 
 def test_per_seed_lists_follow_the_study_seed_order():

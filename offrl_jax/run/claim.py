@@ -5,9 +5,9 @@ of the training steps" (Section 6).  `offrl_jax.run.summary` records it in summa
 - The asymptote (`plateau`): the from-scratch (reference) arm's final score (per seed the mean of its last 10 % of
   evaluations, or of the study's final window; averaged over seeds), and it counts as one only where that arm's
   curve is flat (`stats.trend_is_flat`): per seed the mean of its last 20 % of evaluations minus the mean of the
-  20 % before, whose bootstrap interval over seeds lies within +-5 % of the level (at least 1 point), on at least
-  `MIN_PER_SIDE` (10) evaluations a side, so at least 48 evaluations (`Plateau.paper`; the study tables' own
-  asymptote thresholds take the test without that minimum).  On a 500k-update run evaluated every 5k (100
+  20 % before, whose bootstrap interval over seeds lies within +-5 % of the last 20 %'s mean (at least 1 point)
+  on at least `MIN_PER_SIDE` (10) evaluations a side, so at least 48 evaluations (`Plateau.paper`; the study
+  tables' own asymptote thresholds take the test without that minimum).  On a 500k-update run evaluated every 5k (100
   evaluations) the level is each seed's mean over its last 10 evaluations (455k-500k), and flat means 400k-500k
   moved less than 5 % from 300k-400k, 20 evaluations a seed in each window.  A curve still climbing has no
   asymptote, nor has one that swings so much that the interval stays wider than the margin (no guess is made), nor
@@ -56,7 +56,8 @@ def threshold_name(fraction: float) -> str:
 class Plateau:
     """The reference arm's plateau: its mean final score (`level`, NaN without a reference), the trend of its last
     evaluations (None: too few), whether that trend is flat (the study tables' asymptote thresholds), the
-    evaluations on each side of the test (`per_side`) and its margin (5 % of the level, at least 1 point)."""
+    evaluations on each side of the test (`per_side`) and its margin (5 % of the mean of the last 20 % of
+    evaluations, at least 1 point: `stats.flat_margin`)."""
     level: float
     trend: stats.Estimate | None
     flat: bool
@@ -66,7 +67,7 @@ class Plateau:
     @property
     def paper(self) -> bool:
         """An asymptote for the paper's measure: flat, on at least `MIN_PER_SIDE` evaluations a side."""
-        return self.flat and self.per_side >= MIN_PER_SIDE
+        return self.flat and self.per_side >= MIN_PER_SIDE and math.isfinite(self.level)
 
 
 def plateau(finals: np.ndarray | None, curve: np.ndarray | None) -> Plateau:
@@ -77,7 +78,8 @@ def plateau(finals: np.ndarray | None, curve: np.ndarray | None) -> Plateau:
     finite = np.asarray(finals, dtype=float)
     finite = finite[np.isfinite(finite)]
     k = stats.trend_window(np.shape(curve)[1]) if trend is not None else 0
-    return Plateau(float(finite.mean()) if len(finite) else float("nan"), trend, flat, k,
+    level = float(finite.mean()) if len(finite) else float("nan")  # every seed diverged: no level, so not flat
+    return Plateau(level, trend, flat and math.isfinite(level), k,
                    stats.flat_margin(curve, k) if k else float("nan"))
 
 
@@ -195,7 +197,7 @@ def lines(variant: dict, reference: dict) -> list[str]:
     head = (f"The paper's measure (Section 6: pre-training reaches the asymptote \"in less than 1/2 of the training "
             f"steps\", a speed-up above {PAPER_SPEEDUP:g}x): the asymptote is {name}'s plateau, its final score "
             f"(mean over seeds) where its curve is flat, the change of its last 20 % of evaluations against the 20 % "
-            f"before [95 % CI] within ±5 % of the level on at least {MIN_PER_SIDE} evaluations a side; "
+            f"before [95 % CI] within ±5 % of the last 20 %'s mean on at least {MIN_PER_SIDE} evaluations a side; "
             f"{plateau_text(variant, name)}.")
     if not paper or "speedup" not in paper:
         return ["", head]
@@ -248,8 +250,9 @@ CLAIMS_HEAD = ["| study | variant vs reference | seeds | asymptote (90 %, 95 % o
 CLAIMS_NOTE = ("The paper's measure, per comparison. Asymptote: the reference (from-scratch) arm's plateau, the mean "
                "over its seeds of each seed's last 10 % of evaluations, an asymptote only where its curve is flat. "
                "Plateau test: the change of its last 20 % of evaluations against the 20 % before (per seed, mean "
-               "over seeds [95 % CI]), flat where the interval lies within the margin (±5 % of the level, at least "
-               f"1 point), on at least {MIN_PER_SIDE} evaluations a side (else 'too few evaluations'). Speed-up: "
+               "over seeds [95 % CI]), flat where the interval lies within the margin (±5 % of the last 20 %'s "
+               f"mean, at least 1 point), on at least {MIN_PER_SIDE} evaluations a side (else 'too few "
+               "evaluations'). Speed-up: "
                "the reference's mean updates / the variant's [95 % CI] to each seed's sustained reach, the first "
                "update (pre-training included) at which the mean of its last evaluations (as many as the level "
                f"averages, at least {MIN_WINDOW}) is at or above the threshold; ≥ / ≤ / 'both censored' where seeds "

@@ -176,10 +176,10 @@ def trend_window(evaluations: int, fraction: float = 0.2) -> int:
 
 
 def flat_margin(scores: np.ndarray, k: int, margin: float = 0.05) -> float:
-    """`trend_is_flat`'s margin for `scores` (S, E): `margin` of the level of their last `k` evaluations (the mean
-    over seeds, its absolute value), at least 1 point."""
+    """`trend_is_flat`'s margin for `scores` (S, E): `margin` of the level of their last `k` evaluations (per seed
+    their mean, then the mean over the seeds with no NaN there, its absolute value), at least 1 point."""
     with _quiet():
-        level = abs(float(np.nanmean(np.asarray(scores, dtype=float)[:, -k:])))
+        level = abs(float(np.nanmean(np.asarray(scores, dtype=float)[:, -k:].mean(axis=1))))
     return max(margin * level, 1.0)
 
 
@@ -189,14 +189,14 @@ def trend_is_flat(scores: np.ndarray, fraction: float = 0.2, margin: float = 0.0
     before; its mean over seeds with a bootstrap interval.  Flat is an equivalence test, not a failure to see a
     change: the whole interval lies within +-`margin` of the last window's level (5 %, at least 1 point:
     `flat_margin`), so a noisy curve whose wide interval holds 0 is not flat.  One seed: its change within the
-    margin.  Too few evaluations for two windows (`trend_window`): (None, False)."""
+    margin.  A seed with a NaN in either window (it diverged) is left out, as the final scores leave it out.  Too
+    few evaluations for two windows (`trend_window`): (None, False)."""
     scores = np.asarray(scores, dtype=float)
     assert scores.ndim == 2, scores.shape
     k = trend_window(scores.shape[1], fraction)
     if scores.shape[1] < 2 * k:
         return None, False
-    with _quiet():
-        change = np.nanmean(scores[:, -k:], axis=1) - np.nanmean(scores[:, -2 * k:-k], axis=1)
+    change = scores[:, -k:].mean(axis=1) - scores[:, -2 * k:-k].mean(axis=1)  # NaN for a diverged seed: left out
     trend = interval([change], mean, seed=seed)
     if not math.isfinite(trend.value):
         return trend, False
