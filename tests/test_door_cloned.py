@@ -65,6 +65,9 @@ def test_with_original_reward_only_wraps_dense_door_hammer_relocate_once():
     assert with_original_reward(pen) is pen
     for name in ("hammer", "relocate"):
         assert isinstance(with_original_reward(make_env(name, disable_env_checker=True)), OriginalAdroitReward)
+    # another time limit (data generation's) keeps D4RL's reward too
+    door200 = make_env("door", 200, disable_env_checker=True)
+    assert isinstance(door200, OriginalAdroitReward) and door200.spec.max_episode_steps == 200
 
 
 @needs_demos

@@ -71,8 +71,9 @@ def warn_once_per_message() -> None:
     mujoco.set_mju_user_warning(handler)
 
 
-def make_env(name: str, **kwargs):
-    """A gymnasium env with this project's time limit (the paper's longer limits for Adroit)."""
+def make_env(name: str, max_episode_steps: int | None = None, **kwargs):
+    """A gymnasium env with this project's time limit (the paper's longer limits for Adroit), or
+    `max_episode_steps`; Adroit envs with D4RL's reward either way."""
     import gymnasium as gym
 
     warn_once_per_message()
@@ -86,4 +87,5 @@ def make_env(name: str, **kwargs):
         with_original_reward,  # D4RL's dense reward (gymnasium-robotics >= 1.2.1 flips a sign)
     )
 
-    return with_original_reward(gym.make(spec.gym_id, max_episode_steps=spec.max_episode_steps, **kwargs))
+    limit = spec.max_episode_steps if max_episode_steps is None else max_episode_steps
+    return with_original_reward(gym.make(spec.gym_id, max_episode_steps=limit, **kwargs))

@@ -23,7 +23,7 @@ import numpy as np
 
 from offrl_jax.data.dataset import Dataset
 from offrl_jax.data.generate.reference import D4RL_V2
-from offrl_jax.envs.registry import get_env_spec, make_env, normalized_score, warn_once_per_message
+from offrl_jax.envs.registry import get_env_spec, make_env, normalized_score
 from offrl_jax.nets import TanhGaussianActor, sample_tanh_gaussian
 
 ACTOR_HIDDEN = (256, 256)
@@ -96,18 +96,8 @@ def load_policy(name_or_path: str | Path) -> tuple[dict, dict[str, Any]]:
 # ------------------------------------------------------------------------------------------------------ rollouts
 
 
-def make_gen_env(env_name: str, max_episode_steps: int | None = None):
-    """`make_env(env_name)`, or the same gymnasium env with another time limit."""
-    if max_episode_steps is None:
-        return make_env(env_name)
-    import gymnasium as gym
-
-    warn_once_per_message()
-    return gym.make(get_env_spec(env_name).gym_id, max_episode_steps=max_episode_steps)
-
-
 def _make_envs(env_name: str, num_envs: int, max_episode_steps: int | None, make: Callable | None = None):
-    envs = [make() if make is not None else make_gen_env(env_name, max_episode_steps) for _ in range(num_envs)]
+    envs = [make() if make is not None else make_env(env_name, max_episode_steps) for _ in range(num_envs)]
     for env in envs:
         low, high = env.action_space.low, env.action_space.high
         if not (np.allclose(low, -1.0) and np.allclose(high, 1.0)):
@@ -130,7 +120,7 @@ def rollout_episodes(
     then continues its own RNG.  A step that is both terminated and truncated counts as a terminal.  The recorded
     next observation is the env's real s_{t+1}, also at a time-out (the reset observation is never recorded).
 
-    `make() -> env` builds each env instead of `make_gen_env(env_name, max_episode_steps)` (env_name then only gives
+    `make() -> env` builds each env instead of `make_env(env_name, max_episode_steps)` (env_name then only gives
     the default horizon).  Every key in `info_keys` adds a (n,) float32 field to the episode: `info.get(key, 0)` of
     each step (e.g. "success" for the Adroit envs).
     """

@@ -35,7 +35,7 @@ from typing import Any
 import flax.serialization
 import numpy as np
 
-from offrl_jax.data.generate.collect import evaluate, make_gen_env
+from offrl_jax.data.generate.collect import evaluate
 from offrl_jax.data.generate.replay import ReplayBuffer, reload_replay
 from offrl_jax.data.generate.sac_learner import (
     SACConfig,
@@ -43,7 +43,7 @@ from offrl_jax.data.generate.sac_learner import (
     state_from_bytes,
 )
 from offrl_jax.data.generate.sac_run import check_new_run, discard_unstarted, resume_info, save_state
-from offrl_jax.envs.registry import get_env_spec, normalized_score
+from offrl_jax.envs.registry import get_env_spec, make_env, normalized_score
 from offrl_jax.system.cli import (
     OneLineParser,
     check_writable_dir,
@@ -101,7 +101,7 @@ def train(
     (out / "STOP").unlink(missing_ok=True)
     (out / "run.json").write_text(json.dumps(run, indent=1))
 
-    env = make_gen_env(spec.name, max_episode_steps)
+    env = make_env(spec.name, max_episode_steps)
     obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
     sac = make_sac(obs_dim, act_dim, cfg)
     state = sac.init(seed)
