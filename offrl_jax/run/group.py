@@ -22,6 +22,8 @@ import os
 import shutil
 import sys
 import time
+from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 
 import jax
@@ -77,8 +79,8 @@ def run_group(study: Study, group: tuple[Variant, ...], swept: str | None, ds: D
             raise Stopped(f"{run.name} stopped at update {chunk.update}; last checkpoint: update {run.last_saved}")
         run.check_finite(chunk)
         host_states, scores = run.evaluate(chunk)
+        run.save_best(chunk, host_states, scores)  # first: a resume goes on from `save`'s checkpoint, never back
         run.save(chunk, host_states)
-        run.save_best(chunk, host_states, scores)
         run.record()
     return run.pretraining_updates()
 
@@ -260,15 +262,20 @@ class GroupRun:
                 if failed:
                     self.bar.write(failed, file=sys.stderr)
                     self.recording = False
-            if carried is not None:  # first, so that a checkpoint never points at an older online state
+            # the last checkpoint goes last: what a resume cannot remake (the online state, the hand-over, a kept
+            # copy) is written before it, so a stop in between leaves the checkpoint behind them, never ahead
+            if carried is not None:
                 save_online_state(self.online_path, carried)
-            save_checkpoint(self.ckpt_path, host_states, chunk.update, chunk.seconds, self.rows, self.meta)
+            save = partial(save_checkpoint, states=host_states, update=chunk.update, seconds=chunk.seconds,
+                           history=self.rows, meta=self.meta)
+            if online is not None and not online_chunk and chunk.update == self.last_update:
+                save(self.handover_path)
+            if study.keep_checkpoints and not online_chunk:
+                save_kept(self.out_dir, self.group, chunk.update, study.keep_checkpoints, save)
+            else:
+                save(self.ckpt_path)
             if online_chunk and carried is None:  # the phase's end, or envs that cannot be saved
                 self.online_path.unlink(missing_ok=True)
-            if study.keep_checkpoints and not online_chunk:
-                keep_copy(self.out_dir, self.group, chunk.update, study.keep_checkpoints)
-            if online is not None and not online_chunk and chunk.update == self.last_update:
-                save_checkpoint(self.handover_path, host_states, chunk.update, chunk.seconds, self.rows, self.meta)
         self.last_saved = chunk.update
 
     def save_best(self, chunk: Chunk, host_states, scores: np.ndarray) -> None:
@@ -287,14 +294,20 @@ class GroupRun:
                                              "best_score": self.best[variant.label]})
 
 
-def keep_copy(out_dir: Path, group: tuple[Variant, ...], update: int, newest: int) -> None:
-    """The last checkpoint, just written at `update`, is kept under its update too (a hard link: no copy; the next
-    save replaces the last one by a rename, so the link keeps this one); only the `newest` kept ones remain."""
+def save_kept(out_dir: Path, group: tuple[Variant, ...], update: int, newest: int,
+              save: Callable[[Path], None]) -> None:
+    """The checkpoint at `update`, written (`save(path)`) under its update, then made the last one too (a hard link:
+    one file, two names; the next save replaces the last one by a rename, so the link keeps this one).  In that
+    order: a stop in between leaves the last checkpoint behind the kept one, which the resumed run reaches again.
+    Only the `newest` kept ones remain."""
     last, kept = checkpoint_path(out_dir, group), checkpoint_path(out_dir, group, update)
-    kept.unlink(missing_ok=True)
+    save(kept)
+    linked = last.with_name(last.name + ".link")
+    linked.unlink(missing_ok=True)
     try:
-        os.link(last, kept)
+        os.link(kept, linked)
     except OSError:  # a file system without hard links
-        shutil.copyfile(last, kept)
+        shutil.copyfile(kept, linked)
+    os.replace(linked, last)
     for old in kept_updates(out_dir, group)[:-newest]:
         checkpoint_path(out_dir, group, old).unlink(missing_ok=True)
