@@ -235,3 +235,31 @@ def test_what_a_killed_overwrite_left_aside_is_given_back_or_removed_and_left_al
     assert give_back_replaced(out) is False and not aside.exists()
     assert (out / "checkpoints" / "pretrained.msgpack").read_bytes() == b"new"
     assert f"removed {aside}" in capsys.readouterr().err
+
+
+def test_a_lock_on_the_lock_file_its_holder_just_deleted_is_no_lock(tmp_path, monkeypatch):
+    """A holder deletes the lock file as it lets go: a process that opened that file just before, then locked it,
+    would hold a lock on a file no longer there, and a third process would lock a new one: two writers."""
+    import fcntl
+    import os
+
+    from offrl_jax.system import cli
+
+    run = tmp_path / "run"
+    first = cli.lock_run_dir(run)
+    flock = fcntl.flock
+
+    def first_lets_go_between_open_and_flock(handle, op):
+        if not first.closed:
+            Path(first.name).unlink()
+            first.close()
+        flock(handle, op)
+
+    monkeypatch.setattr(fcntl, "flock", first_lets_go_between_open_and_flock)
+    second = cli.lock_run_dir(run)
+    try:
+        assert os.fstat(second.fileno()).st_ino == os.stat(cli.lock_file(run)).st_ino  # the file at its place
+        with pytest.raises(OSError, match="being written by another process"):
+            cli.lock_run_dir(run)  # a third process is refused
+    finally:
+        second.close()
