@@ -4,8 +4,8 @@
     python -m benchmarks.profile --algo edac --json --out profile-edac
     taskset -c 0 env XLA_FLAGS=--xla_cpu_multi_thread_eigen=false python -m benchmarks.profile   # one core
 
-The chunk function (`offrl_jax.driver.make_chunk_fn`, S = 1, synthetic hopper-shaped data as in
-`benchmarks/throughput.py`) is compiled, run once, then run again under `jax.profiler.trace`.  The trace's XLA CPU
+The chunk function (`offrl_jax.driver.make_chunk_fn`, S = 1, synthetic hopper-shaped data of
+`benchmarks/common.py`) is compiled, run once, then run again under `jax.profiler.trace`.  The trace's XLA CPU
 op events (thunks: a matmul, a fused element-wise loop, a reduction, ...) are matched by name to the optimised HLO,
 whose metadata says which part of the program made each op (`op_name`, e.g.
 `transpose(jvp(CriticEnsemble))/vmap(VmapCritic_0)/MLP_0/LayerNorm_0/...`).  Each op goes to one part:
@@ -20,7 +20,7 @@ whose metadata says which part of the program made each op (`op_name`, e.g.
 
 The table gives, per part, milliseconds per update, the share of the traced op time, and for the matmuls the rate
 they ran at (FLOPs from the dot shapes).  The share of time outside the matmuls is what keeps an update from the
-chain rate of `benchmarks/throughput.py`.
+chain rate of `benchmarks/common.py`.
 """
 from __future__ import annotations
 

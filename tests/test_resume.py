@@ -329,10 +329,12 @@ def test_a_resume_keeps_the_rows_of_variants_not_yet_resumed_in_curves_csv(tmp_p
 
 
 @pytest.mark.parametrize("keep", [0, 5])
-def test_a_stop_as_the_last_checkpoint_is_written_leaves_best_and_kept_before_it(tmp_path, monkeypatch, keep):
-    """What a resume cannot remake is written before the last checkpoint: a stop in between leaves the checkpoint
-    behind the best, kept and hand-over files (a resume reaches them again), never ahead of them (they were lost:
-    a resume rebuilds the best score from the checkpoint's rows and so never wrote that .best)."""
+def test_a_stop_as_the_last_checkpoint_is_written_leaves_the_best_before_it(tmp_path, monkeypatch, keep):
+    """The best checkpoint is written before the last one: a stop in between leaves the last checkpoint behind it
+    (a resume reaches it again), never ahead of it (it was lost: a resume rebuilds the best score from the
+    checkpoint's rows, so it never wrote that .best).  A kept copy comes after the last checkpoint, and a directory
+    with a best checkpoint alone has none to resume (an --overwrite then gives the earlier run back)."""
+    from offrl_jax.app.outputs import has_checkpoint
     from offrl_jax.run import group
     from offrl_jax.run.resume import kept_updates
 
@@ -340,16 +342,14 @@ def test_a_stop_as_the_last_checkpoint_is_written_leaves_best_and_kept_before_it
                        variants=(Variant.of("pretrained", "td3bc", pretrain_updates=100, hidden=(32, 32)),))
     save = group.save_checkpoint
 
-    def stop(*args, **kwargs):
-        raise KeyboardInterrupt
-
     def stop_at_the_last(path, *args, **kwargs):
-        (stop if Path(path).name == "pretrained.msgpack" else save)(path, *args, **kwargs)
+        if Path(path).name == "pretrained.msgpack":
+            raise KeyboardInterrupt
+        save(path, *args, **kwargs)
 
     monkeypatch.setattr(group, "save_checkpoint", stop_at_the_last)
-    monkeypatch.setattr(group.os, "link", stop)  # with kept copies the last checkpoint is a link to the kept one
     with pytest.raises(KeyboardInterrupt):
         run_study(study, tmp_path / "run", synthetic_dataset(), progress=False)
     ckpts = tmp_path / "run" / "checkpoints"
-    assert (ckpts / "pretrained.best.msgpack").is_file() and not (ckpts / "pretrained.msgpack").exists()
-    assert kept_updates(tmp_path / "run", study.variants) == ([100] if keep else [])
+    assert sorted(p.name for p in ckpts.iterdir()) == ["pretrained.best.msgpack"]
+    assert kept_updates(tmp_path / "run", study.variants) == [] and not has_checkpoint(tmp_path / "run")

@@ -37,6 +37,7 @@ from offrl_jax.app.launch import check_backend, start_local_processes, start_pro
 from offrl_jax.app.outputs import (
     check_resume_dir,
     give_back_replaced,
+    has_checkpoint,
     output_dir,
     replaced_dir,
     saved_studies,
@@ -283,7 +284,7 @@ class Command:
         failed = self.local.close(ok) if self.local is not None else None
         out, args = self.out, self.args
         if self.replaced is not None and self.replaced.exists():
-            if ok or (out.is_dir() and any(out.rglob("*.msgpack"))):
+            if ok or has_checkpoint(out):
                 shutil.rmtree(self.replaced, ignore_errors=True)
             else:
                 shutil.rmtree(out, ignore_errors=True)

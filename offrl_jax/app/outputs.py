@@ -61,7 +61,10 @@ def replaced_dir(out: Path) -> Path:
 
 
 def has_checkpoint(out: Path) -> bool:
-    return out.is_dir() and any(out.rglob("*.msgpack"))
+    """Whether run directory `out` has a checkpoint to resume from (a best one alone is none: `is_resumable`)."""
+    from offrl_jax.run.resume import is_resumable  # jax and the families: only when a run directory is looked at
+
+    return out.is_dir() and any(is_resumable(p) for p in out.rglob("*.msgpack"))
 
 
 def give_back_replaced(out: Path) -> bool:

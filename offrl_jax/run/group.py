@@ -22,8 +22,6 @@ import os
 import shutil
 import sys
 import time
-from collections.abc import Callable
-from functools import partial
 from pathlib import Path
 
 import jax
@@ -262,20 +260,17 @@ class GroupRun:
                 if failed:
                     self.bar.write(failed, file=sys.stderr)
                     self.recording = False
-            # the last checkpoint goes last: what a resume cannot remake (the online state, the hand-over, a kept
-            # copy) is written before it, so a stop in between leaves the checkpoint behind them, never ahead
+            # what a resume cannot remake (the online state, the hand-over) is written before the last checkpoint,
+            # so a stop in between leaves the checkpoint behind them, never ahead
             if carried is not None:
                 save_online_state(self.online_path, carried)
-            save = partial(save_checkpoint, states=host_states, update=chunk.update, seconds=chunk.seconds,
-                           history=self.rows, meta=self.meta)
             if online is not None and not online_chunk and chunk.update == self.last_update:
-                save(self.handover_path)
-            if study.keep_checkpoints and not online_chunk:
-                save_kept(self.out_dir, self.group, chunk.update, study.keep_checkpoints, save)
-            else:
-                save(self.ckpt_path)
+                save_checkpoint(self.handover_path, host_states, chunk.update, chunk.seconds, self.rows, self.meta)
+            save_checkpoint(self.ckpt_path, host_states, chunk.update, chunk.seconds, self.rows, self.meta)
             if online_chunk and carried is None:  # the phase's end, or envs that cannot be saved
                 self.online_path.unlink(missing_ok=True)
+            if study.keep_checkpoints and not online_chunk:
+                keep_copy(self.out_dir, self.group, chunk.update, study.keep_checkpoints)
         self.last_saved = chunk.update
 
     def save_best(self, chunk: Chunk, host_states, scores: np.ndarray) -> None:
@@ -294,20 +289,16 @@ class GroupRun:
                                              "best_score": self.best[variant.label]})
 
 
-def save_kept(out_dir: Path, group: tuple[Variant, ...], update: int, newest: int,
-              save: Callable[[Path], None]) -> None:
-    """The checkpoint at `update`, written (`save(path)`) under its update, then made the last one too (a hard link:
-    one file, two names; the next save replaces the last one by a rename, so the link keeps this one).  In that
-    order: a stop in between leaves the last checkpoint behind the kept one, which the resumed run reaches again.
-    Only the `newest` kept ones remain."""
+def keep_copy(out_dir: Path, group: tuple[Variant, ...], update: int, newest: int) -> None:
+    """The last checkpoint, just written at `update`, is kept under its update too (a hard link: no copy; the next
+    save replaces the last one by a rename, so the link keeps this one); only the `newest` kept ones remain.  After
+    the last checkpoint, so that a kept copy means a checkpoint to resume from (`resume.is_resumable`); a stop in
+    between loses this one copy, not the run's."""
     last, kept = checkpoint_path(out_dir, group), checkpoint_path(out_dir, group, update)
-    save(kept)
-    linked = last.with_name(last.name + ".link")
-    linked.unlink(missing_ok=True)
+    kept.unlink(missing_ok=True)
     try:
-        os.link(kept, linked)
+        os.link(last, kept)
     except OSError:  # a file system without hard links
-        shutil.copyfile(kept, linked)
-    os.replace(linked, last)
+        shutil.copyfile(last, kept)
     for old in kept_updates(out_dir, group)[:-newest]:
         checkpoint_path(out_dir, group, old).unlink(missing_ok=True)

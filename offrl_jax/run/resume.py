@@ -52,6 +52,14 @@ def checkpoint_path(out_dir: Path, group: tuple[Variant, ...], which: str | int 
     return out_dir / "checkpoints" / (f"{labels}.msgpack" if which == "last" else f"{labels}.{int(which)}.msgpack")
 
 
+def is_resumable(path: Path) -> bool:
+    """Whether `path` is a checkpoint that a run writes only once it has a last checkpoint to resume from: any but
+    a best, hand-over or online file (`checkpoint_path`: those can be written before the first last checkpoint) or
+    an atomic write's temporary file."""
+    return (path.suffix == ".msgpack" and not path.name.startswith(".")
+            and not path.name.endswith((".best.msgpack", ".handover.msgpack", ".online.msgpack")))
+
+
 def save_online_state(path: Path, state: dict) -> None:
     """Write the online phase's state (`offrl_jax.online.loop.online_state`), before the checkpoint it belongs to."""
     atomic_write_bytes(path, serialization.msgpack_serialize(state))

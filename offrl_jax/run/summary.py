@@ -6,7 +6,7 @@ Every measure is per seed first (`offrl_jax.run.stats`), then aggregated with a 
 - per threshold, each seed's updates and seconds (pre-training included) to first reach it, a seed that never
   does censored at the budget; the thresholds: the behaviour data's score, 80/90/95 % of the best seed-mean
   evaluation of any variant, and 80/90/95 % of the from-scratch final where that is an asymptote (the interval of
-  its change over the last 20 % of evaluations within +-5 % of its level, `stats.trend_is_flat`);
+  its change over the last 20 % of evaluations within +-5 % of their mean, `stats.trend_is_flat`);
 - the BC level (`offrl_jax.run.bc_level`: the pre-trained actor's score at the hand-over, or a BC arm's final) and
   per seed the improvement over it, with BC + 50 % and BC + 90 % of the way to the best score as thresholds too, and
   per threshold the seeds that reached it by the BC actor, before any RL update;
@@ -135,7 +135,7 @@ def _summarize(study: Study, rows: list[dict], pretrain_ends: dict[str, int], be
             "final_score_mean": float(np.nanmean(finals[v.label])),
             "asymptote": asymptote,  # the reference's mean final score
             # its mean change over the last 20 % of evaluations (against the 20 % before), and whether its interval
-            # lies within +-5 % of its level: only a flat one is an asymptote the thresholds may be fractions of
+            # lies within +-5 % of their mean: only a flat one is an asymptote the thresholds may be fractions of
             "asymptote_trend": trend.to_json() if trend is not None else None, "asymptote_flat": flat,
             # the test's evaluations a side and margin; the paper's measure reads an asymptote only where it is flat
             # on at least claim.MIN_PER_SIDE a side, and each seed's sustained reach of 90 % and 95 % of it
