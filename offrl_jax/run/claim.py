@@ -67,7 +67,7 @@ class Plateau:
     @property
     def paper(self) -> bool:
         """An asymptote for the paper's measure: flat, on at least `MIN_PER_SIDE` evaluations a side."""
-        return self.flat and self.per_side >= MIN_PER_SIDE and math.isfinite(self.level)
+        return self.flat and self.per_side >= MIN_PER_SIDE
 
 
 def plateau(finals: np.ndarray | None, curve: np.ndarray | None) -> Plateau:

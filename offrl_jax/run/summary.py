@@ -108,9 +108,9 @@ def _summarize(study: Study, rows: list[dict], pretrain_ends: dict[str, int], be
         mean_curve = np.nanmean(scores, axis=0) if len(updates) else np.array([np.nan])
         peak = int(np.nanargmax(mean_curve)) if np.isfinite(mean_curve).any() else None
         last = scores[:, -1] if len(updates) else np.full(len(study.seeds), np.nan)
-        with np.errstate(invalid="ignore"):  # a diverged seed (final NaN) has no mean over the run: left out
-            auc = np.where(np.isfinite(finals[v.label]), np.nanmean(scores, axis=1), np.nan) if len(updates) \
-                else np.full(len(study.seeds), np.nan)
+        # the mean over the run; a diverged seed (final NaN) has none: left out, as from the finals
+        auc = (np.where(np.isfinite(finals[v.label]), np.nanmean(scores, axis=1), np.nan) if len(updates)
+               else np.full(len(study.seeds), np.nan))
         reach = []
         for name, value in thresholds if len(updates) else ():
             at, censored = stats.first_reach(updates, scores, value)

@@ -199,8 +199,9 @@ def lock_run_dir(path: Path):
     path = Path(path).resolve()
     created = [p for p in reversed(path.parents) if not p.exists()]  # made here, outermost first
     path.parent.mkdir(parents=True, exist_ok=True)
+    place = lock_file(path)
     while True:
-        handle = open(lock_file(path), "a")  # noqa: SIM115  (kept open: it is the lock)
+        handle = open(place, "a")  # noqa: SIM115  (kept open: it is the lock)
         try:
             fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
@@ -209,7 +210,7 @@ def lock_run_dir(path: Path):
         # the holder before us deletes the lock file as it lets go: a lock on a file no longer at its place is no
         # lock (a third process would lock a new file there), so take the one at its place
         try:
-            current = os.stat(lock_file(path)).st_ino == os.fstat(handle.fileno()).st_ino
+            current = os.stat(place).st_ino == os.fstat(handle.fileno()).st_ino
         except FileNotFoundError:
             current = False
         if current:
